@@ -1,0 +1,136 @@
+"""The FMI 2.0 modelDescription.xml (Model Exchange and Co-Simulation in one FMU).
+
+Follows FMI 2.0.4 §2.2 (common), §3.3 (Model Exchange) and §4.3 (Co-Simulation): every
+variable carries a unit, parameters are tunable with start/min/max, states have
+``initial="approx"`` (overwritten by the static equilibrium unless ``start_in_equilibrium`` is
+false), and ``<ModelStructure>`` lists outputs, derivatives and initial unknowns with their
+dependencies (1-based indices into ``<ModelVariables>``).
+"""
+from __future__ import annotations
+
+import xml.etree.ElementTree as ElementTree
+
+from fmu_src.spec import ModelSpec
+
+from .variables import FmuVariable, list_dependencies
+from .xml_writing import (GENERATION_TOOL, add_default_experiment, add_log_categories,
+                          add_unit_definitions, format_bounds, format_boolean, format_real,
+                          render_xml)
+
+_COMMON_CAPABILITIES = {
+    "needsExecutionTool": "false",
+    "canBeInstantiatedOnlyOncePerProcess": "false",
+    "canNotUseMemoryManagementFunctions": "false",
+    "canGetAndSetFMUstate": "true",
+    "canSerializeFMUstate": "true",
+    "providesDirectionalDerivative": "true",
+}
+
+
+def _add_interfaces(root: ElementTree.Element, spec: ModelSpec,
+                    source_files: tuple[str, ...]) -> None:
+    model_exchange = ElementTree.SubElement(root, "ModelExchange", {
+        "modelIdentifier": spec.identifier, **_COMMON_CAPABILITIES,
+        "completedIntegratorStepNotNeeded": "true"})
+    co_simulation = ElementTree.SubElement(root, "CoSimulation", {
+        "modelIdentifier": spec.identifier, **_COMMON_CAPABILITIES,
+        "canHandleVariableCommunicationStepSize": "true",
+        "canInterpolateInputs": "false",
+        "maxOutputDerivativeOrder": "0",
+        "canRunAsynchronuously": "false"})
+    for interface in (model_exchange, co_simulation):
+        files = ElementTree.SubElement(interface, "SourceFiles")
+        for name in source_files:
+            if name.endswith(".c"):
+                ElementTree.SubElement(files, "File", name=name)
+
+
+def _type_element(variable: FmuVariable) -> tuple[str, dict[str, str]]:
+    if variable.type == "Boolean":
+        attributes = {}
+        if variable.start is not None:
+            attributes["start"] = format_boolean(variable.start)
+        return "Boolean", attributes
+    attributes = {"unit": variable.unit} if variable.unit else {}
+    if variable.start is not None:
+        attributes["start"] = format_real(variable.start)
+    attributes.update(format_bounds(variable))
+    if variable.derivative_of is not None:
+        attributes["derivative"] = str(variable.derivative_of + 1)
+    return "Real", attributes
+
+
+def _add_variables(root: ElementTree.Element, variables: tuple[FmuVariable, ...]) -> None:
+    element = ElementTree.SubElement(root, "ModelVariables")
+    for variable in variables:
+        attributes = {"name": variable.name, "valueReference": str(variable.value_reference),
+                      "description": variable.description, "causality": variable.causality,
+                      "variability": variable.variability}
+        if variable.initial is not None:
+            attributes["initial"] = variable.initial
+        scalar = ElementTree.SubElement(element, "ScalarVariable", attributes)
+        tag, type_attributes = _type_element(variable)
+        ElementTree.SubElement(scalar, tag, type_attributes)
+
+
+def _unknown(parent: ElementTree.Element, variable: FmuVariable,
+             dependencies: tuple[FmuVariable, ...] | None) -> None:
+    attributes = {"index": str(variable.value_reference + 1)}
+    if dependencies is not None:
+        attributes["dependencies"] = " ".join(
+            str(v.value_reference + 1) for v in sorted(dependencies,
+                                                        key=lambda v: v.value_reference))
+    ElementTree.SubElement(parent, "Unknown", attributes)
+
+
+def _add_model_structure(root: ElementTree.Element, variables: tuple[FmuVariable, ...]) -> None:
+    structure = ElementTree.SubElement(root, "ModelStructure")
+    outputs = ElementTree.SubElement(structure, "Outputs")
+    for variable in variables:
+        if variable.kind == "output":
+            _unknown(outputs, variable, list_dependencies(variable, variables))
+    derivatives = ElementTree.SubElement(structure, "Derivatives")
+    for variable in variables:
+        if variable.kind == "derivative":
+            _unknown(derivatives, variable, list_dependencies(variable, variables))
+    initial = ElementTree.SubElement(structure, "InitialUnknowns")
+    for variable in variables:  # ascending index, as FMI 2.0 requires
+        if variable.kind in ("state", "derivative", "output"):
+            _unknown(initial, variable, None)  # no attribute: depends on all knowns
+
+
+def write_model_description_fmi2(spec: ModelSpec, variables: tuple[FmuVariable, ...],
+                                 token: str, source_files: tuple[str, ...]) -> str:
+    """Render the FMI 2.0 modelDescription.xml.
+
+    Parameters
+    ----------
+    spec : ModelSpec
+        The model.
+    variables : tuple of FmuVariable
+        Its variable table (:func:`build_fmu.variables.layout_variables`).
+    token : str
+        The GUID, ``{8-4-4-4-12}`` hexadecimal.
+    source_files : tuple of str
+        Names of the files in ``sources/`` (the ``.c`` files are listed).
+
+    Returns
+    -------
+    str
+        The XML text.
+    """
+    root = ElementTree.Element("fmiModelDescription", {
+        "fmiVersion": "2.0",
+        "modelName": spec.identifier,
+        "guid": token,
+        "description": spec.description,
+        "generationTool": GENERATION_TOOL,
+        "variableNamingConvention": "flat",
+        "numberOfEventIndicators": "0"})
+    _add_interfaces(root, spec, source_files)
+    add_unit_definitions(root, variables)
+    add_log_categories(root)
+    add_default_experiment(root, spec)
+    _add_variables(root, variables)
+    _add_model_structure(root, variables)
+    return render_xml(root)

@@ -1,0 +1,245 @@
+"""The FMU's variable table: one row per FMI variable, shared by the XML writers and the C table.
+
+The value reference of a variable is its row number, in this order::
+
+    time | states x = [q; v] | their derivatives | inputs u | outputs y | parameters p
+         | operating points u0 (linearised models only) | solver_tolerance | start_in_equilibrium
+
+The runtime (``fmu_src/runtime/fmu_core.c``) reads the same table from the generated
+``model_config.h``, so the two sides cannot disagree.
+"""
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+
+from fmu_src.spec import ModelSpec
+
+from .units import divide_unit_by_time
+
+#: Name of the Real parameter holding the co-simulation solver's tolerance.
+SOLVER_TOLERANCE_NAME = "solver_tolerance"
+#: Name of the Boolean parameter choosing the initial state.
+START_IN_EQUILIBRIUM_NAME = "start_in_equilibrium"
+#: Prefix of the states of a linearised model (deviations from the equilibrium).
+DEVIATION_PREFIX = "delta_"
+#: Suffix of the operating-point parameter of each input of a linearised model.
+OPERATING_POINT_SUFFIX = "0"
+
+#: Log categories of the runtime, in the order of ``LOG_CATEGORIES`` in ``fmu_core.c``.
+LOG_CATEGORIES: tuple[tuple[str, str], ...] = (
+    ("logStatusError", "Errors: refused arguments and failed computations"),
+    ("logStatusWarning", "Warnings"),
+    ("logEvents", "Mode changes"),
+    ("logNonlinearSystems", "Newton iterations of the static equilibrium"),
+    ("logSolver", "Co-simulation integrator: sub-steps and step sizes"),
+)
+
+_C_IDENTIFIER = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+
+
+@dataclass(frozen=True)
+class FmuVariable:
+    """One FMI variable and where the runtime keeps its value.
+
+    Parameters
+    ----------
+    name, description : str
+        As shown in the modelDescription.xml.
+    value_reference : int
+        Row number in the table (FMI 2.0 index = value_reference + 1).
+    kind : str
+        ``"time"``, ``"state"``, ``"derivative"``, ``"input"``, ``"output"``, ``"parameter"``,
+        ``"operating_point"``, ``"solver_tolerance"`` or ``"start_in_equilibrium"``.
+    index : int
+        Position within the runtime vector of that kind (x, u, y, p, u0).
+    type : str
+        ``"Real"`` or ``"Boolean"``.
+    causality, variability : str
+        FMI causality and variability.
+    initial : str or None
+        FMI ``initial`` attribute, ``None`` to leave it out.
+    start : float or None
+        Start value (``None``: no start attribute).
+    minimum, maximum : float
+        Admissible range (infinite: no attribute).
+    unit : str or None
+        Unit string (``None`` for Booleans).
+    derivative_of : int or None
+        For a state derivative, the value reference of its state.
+    """
+
+    name: str
+    description: str
+    value_reference: int
+    kind: str
+    index: int
+    type: str
+    causality: str
+    variability: str
+    initial: str | None
+    start: float | None
+    minimum: float = -math.inf
+    maximum: float = math.inf
+    unit: str | None = None
+    derivative_of: int | None = None
+
+
+def _check_spec(spec: ModelSpec) -> None:
+    if not _C_IDENTIFIER.match(spec.identifier):
+        raise ValueError(f"model identifier {spec.identifier!r} is not a valid C identifier")
+    if len(spec.coordinates) != len(spec.velocities) or not spec.coordinates:
+        raise ValueError(f"model {spec.identifier}: {len(spec.coordinates)} coordinates but "
+                         f"{len(spec.velocities)} velocities (need the same, at least one)")
+    for parameter in spec.parameters:
+        if not parameter.minimum <= parameter.value <= parameter.maximum:
+            raise ValueError(f"model {spec.identifier}: parameter {parameter.name!r} = "
+                             f"{parameter.value} is outside its range "
+                             f"[{parameter.minimum}, {parameter.maximum}]")
+
+
+def _state_rows(spec: ModelSpec, first: int) -> list[FmuVariable]:
+    rows = []
+    for i, state in enumerate(spec.states):
+        name = f"{DEVIATION_PREFIX}{state.name}" if spec.linearised else state.name
+        description = (f"Deviation from the equilibrium at the operating point: "
+                       f"{state.description}" if spec.linearised else state.description)
+        rows.append(FmuVariable(
+            name=name, description=description, value_reference=first + i, kind="state",
+            index=i, type="Real", causality="local", variability="continuous",
+            initial="approx", start=0.0 if spec.linearised else float(state.start),
+            unit=state.unit))
+    return rows
+
+
+def _derivative_rows(states: list[FmuVariable], first: int) -> list[FmuVariable]:
+    return [FmuVariable(
+        name=f"der({state.name})", description=f"Time derivative of {state.name}",
+        value_reference=first + i, kind="derivative", index=i, type="Real", causality="local",
+        variability="continuous", initial="calculated", start=None,
+        unit=divide_unit_by_time(state.unit), derivative_of=state.value_reference)
+        for i, state in enumerate(states)]
+
+
+def _signal_rows(spec: ModelSpec, first: int) -> list[FmuVariable]:
+    rows = []
+    for i, signal in enumerate(spec.inputs):
+        rows.append(FmuVariable(
+            name=signal.name, description=signal.description, value_reference=first + i,
+            kind="input", index=i, type="Real", causality="input", variability="continuous",
+            initial=None, start=float(signal.start), unit=signal.unit))
+    first += len(rows)
+    for i, signal in enumerate(spec.outputs):
+        rows.append(FmuVariable(
+            name=signal.name, description=signal.description, value_reference=first + i,
+            kind="output", index=i, type="Real", causality="output", variability="continuous",
+            initial="calculated", start=None, unit=signal.unit))
+    return rows
+
+
+def _parameter_rows(spec: ModelSpec, first: int) -> list[FmuVariable]:
+    rows = []
+    for i, parameter in enumerate(spec.parameters):
+        description = parameter.description
+        if parameter.provenance:
+            description = f"{description} [{parameter.provenance}]"
+        rows.append(FmuVariable(
+            name=parameter.name, description=description, value_reference=first + i,
+            kind="parameter", index=i, type="Boolean" if parameter.boolean else "Real",
+            causality="parameter", variability="tunable", initial=None,
+            start=float(parameter.value), minimum=float(parameter.minimum),
+            maximum=float(parameter.maximum),
+            unit=None if parameter.boolean else parameter.unit))
+    return rows
+
+
+def _runtime_rows(spec: ModelSpec, first: int) -> list[FmuVariable]:
+    rows = []
+    if spec.linearised:
+        for i, signal in enumerate(spec.inputs):
+            rows.append(FmuVariable(
+                name=f"{signal.name}{OPERATING_POINT_SUFFIX}",
+                description=f"Operating point of input {signal.name} about which the model is "
+                            "linearised",
+                value_reference=first + i, kind="operating_point", index=i, type="Real",
+                causality="parameter", variability="tunable", initial=None,
+                start=float(signal.start), unit=signal.unit))
+    first += len(rows)
+    rows.append(FmuVariable(
+        name=SOLVER_TOLERANCE_NAME,
+        description="Tolerance of the co-simulation integrator (Rosenbrock RODAS4 with "
+                    "error control): local error per sub-step below tol (1 + |x|); a smaller "
+                    "tolerance given by the importer at set-up takes precedence",
+        value_reference=first, kind="solver_tolerance", index=0, type="Real",
+        causality="parameter", variability="tunable", initial=None, start=1e-6,
+        minimum=1e-12, maximum=1e-2, unit="1"))
+    rows.append(FmuVariable(
+        name=START_IN_EQUILIBRIUM_NAME,
+        description="true: the states start in the static equilibrium for the initial inputs "
+                    "and parameters; false: the state start values are used as they are",
+        value_reference=first + 1, kind="start_in_equilibrium", index=0, type="Boolean",
+        causality="parameter", variability="fixed", initial=None, start=1.0))
+    return rows
+
+
+def layout_variables(spec: ModelSpec) -> tuple[FmuVariable, ...]:
+    """Lay out all FMI variables of a model with their value references.
+
+    Parameters
+    ----------
+    spec : ModelSpec
+        The model.
+
+    Returns
+    -------
+    tuple of FmuVariable
+        Ordered by value reference (0, 1, 2, ...).
+
+    Raises
+    ------
+    ValueError
+        If the identifier is not a C identifier, a name is used twice, or a default parameter
+        value lies outside its range.
+    """
+    _check_spec(spec)
+    rows = [FmuVariable(name="time", description="Simulation time", value_reference=0,
+                        kind="time", index=0, type="Real", causality="independent",
+                        variability="continuous", initial=None, start=None, unit="s")]
+    states = _state_rows(spec, len(rows))
+    rows += states
+    rows += _derivative_rows(states, len(rows))
+    rows += _signal_rows(spec, len(rows))
+    rows += _parameter_rows(spec, len(rows))
+    rows += _runtime_rows(spec, len(rows))
+    seen: dict[str, FmuVariable] = {}
+    for row in rows:
+        if row.name in seen:
+            raise ValueError(f"model {spec.identifier}: variable name {row.name!r} is used by "
+                             f"both a {seen[row.name].kind} and a {row.kind}")
+        seen[row.name] = row
+    return tuple(rows)
+
+
+def list_dependencies(variable: FmuVariable,
+                    variables: tuple[FmuVariable, ...]) -> tuple[FmuVariable, ...]:
+    """The knowns (states, inputs) an output or state derivative depends on.
+
+    ``der(q_i) = v_i`` depends on ``v_i`` only; accelerations and outputs are taken to depend
+    on every state and input (the runtime's directional derivatives give the exact values).
+
+    Parameters
+    ----------
+    variable : FmuVariable
+        An output or a state derivative.
+    variables : tuple of FmuVariable
+        The whole table.
+
+    Returns
+    -------
+    tuple of FmuVariable
+    """
+    states = [v for v in variables if v.kind == "state"]
+    if variable.kind == "derivative" and variable.index < len(states) // 2:
+        return (states[len(states) // 2 + variable.index],)
+    return tuple(v for v in variables if v.kind in ("state", "input"))

@@ -1,0 +1,181 @@
+"""The project's models by name: symbolic form, parameters, Python evaluation and FMU specs.
+
+Examples
+--------
+>>> from fmu_src.models import Model
+>>> pantograph = Model("Pantograph")
+>>> x0 = pantograph.equilibrium(eta=2.0, p=4.0)
+>>> round(float(pantograph.outputs(x0, eta=2.0, p=4.0)[2]))   # contact force [N]
+81
+"""
+from __future__ import annotations
+
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from fmu_src.codegen import generate_c_code
+from fmu_src.numeric import LinearisedModel, ModelEvaluationError, NumericModel
+from fmu_src.oscillators import derive_oscillator
+from fmu_src.pantograph import PHI1_SEARCH_RANGE, derive_pantograph
+from fmu_src.parameters import ParameterError, ParameterSet
+from fmu_src.spec import ModelSpec
+from fmu_src.symbolic import MechanicalModel
+
+#: Models by name, each with the function that derives it.
+DERIVATIONS = {
+    "Pantograph": derive_pantograph,
+    "TwoMass": lambda: derive_oscillator(2),
+    "ThreeMass": lambda: derive_oscillator(3),
+}
+MODEL_NAMES = tuple(DERIVATIONS)
+#: The FMUs that ``panto build-fmu`` builds (each as FMI 2.0 and FMI 3.0).
+FMU_NAMES = ("Pantograph", "PantographLinear", "TwoMass", "ThreeMass")
+
+
+def symbolic_model(name: str) -> MechanicalModel:
+    """The symbolic model called ``name`` (one of :data:`MODEL_NAMES`)."""
+    try:
+        return DERIVATIONS[name]()
+    except KeyError:
+        raise ValueError(f"unknown model {name!r}; choose one of {list(MODEL_NAMES)}") from None
+
+
+@lru_cache(maxsize=None)
+def numeric_model(name: str) -> NumericModel:
+    """The compiled Python evaluation of a model (cached)."""
+    return NumericModel(symbolic_model(name))
+
+
+def default_parameters(name: str) -> ParameterSet:
+    """The default parameter set of a model, with units, bounds and provenance."""
+    return ParameterSet(name, symbolic_model(name).parameters)
+
+
+def load_parameters(path: str | Path, name: str | None = None) -> ParameterSet:
+    """Read a parameter file; the model is taken from the file unless ``name`` is given."""
+    if name is None:
+        import json
+
+        try:
+            name = json.loads(Path(path).read_text()).get("model")
+        except (OSError, ValueError, AttributeError) as error:
+            raise ParameterError(f"{path}: cannot read parameter file ({error})") from error
+        if name is None:
+            raise ParameterError(f"{path}: the file does not say which model it is for ('model')")
+    params = ParameterSet.load(path, symbolic_model(name).parameters, name)
+    check_parameters(params)
+    return params
+
+
+def check_parameters(params: ParameterSet) -> None:
+    """Model-specific admissibility beyond the bounds; raises :class:`ParameterError`.
+
+    For the pantograph, the linkage must close somewhere in the working range of phi1.
+    """
+    if params.model != "Pantograph":
+        return
+    numeric = numeric_model("Pantograph")
+    low, high = PHI1_SEARCH_RANGE
+    for phi1 in np.linspace(low, high, 28):
+        try:
+            numeric.dependents(params.vector(), [phi1, 0.0, 0.0])
+            return
+        except ModelEvaluationError:
+            continue
+    raise ParameterError(
+        f"{params.source}: with l1={params['l1']}, l2={params['l2']}, l3={params['l3']}, "
+        f"c={params['c']}, d={params['d']} the linkage cannot close for any phi1 in "
+        f"[{low}, {high}] rad")
+
+
+def model_spec(name: str) -> ModelSpec:
+    """The :class:`ModelSpec` (variables, parameters, generated C code) of one FMU.
+
+    ``"PantographLinear"`` is the pantograph's C code compiled in linearised mode.
+    """
+    linearised = name.endswith("Linear")
+    model = symbolic_model(name.removesuffix("Linear"))
+    if linearised:
+        description = (f"{model.description}, linearised about the static equilibrium for the "
+                       "operating point (eta0, p0) (thesis section 2.4)")
+    else:
+        description = model.description
+    return ModelSpec(
+        identifier=name, description=description,
+        coordinates=tuple(_distinct_from_outputs(c, model) for c in model.coordinates),
+        velocities=model.velocities, inputs=model.inputs, outputs=model.outputs,
+        parameters=model.parameters, c_code=_c_code(model.name), linearised=linearised,
+    )
+
+
+def _distinct_from_outputs(variable, model: MechanicalModel):
+    """FMI variables need unique names: a coordinate that is also an output (the pantograph's
+    head height ``xi``) is exposed as the state ``<name>_state``; the output keeps the name."""
+    if any(o.name == variable.name for o in model.outputs):
+        from dataclasses import replace
+
+        return replace(variable, name=f"{variable.name}_state")
+    return variable
+
+
+@lru_cache(maxsize=None)
+def _c_code(name: str) -> str:
+    return generate_c_code(symbolic_model(name))
+
+
+class Model:
+    """A model with one parameter set, evaluated in Python (the FMUs' twin for fitting scripts).
+
+    Parameters
+    ----------
+    name : str
+        ``"Pantograph"``, ``"TwoMass"`` or ``"ThreeMass"``.
+    parameters : ParameterSet or mapping, optional
+        Parameter values (defaults where missing).
+    """
+
+    def __init__(self, name: str, parameters: ParameterSet | dict | None = None):
+        self.name = name
+        self.numeric = numeric_model(name)
+        if isinstance(parameters, ParameterSet):
+            self.parameters = parameters
+        else:
+            self.parameters = default_parameters(name).with_values(parameters or {})
+        check_parameters(self.parameters)
+        self._p = self.parameters.vector()
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        m = self.numeric.model
+        return tuple(s.name for s in m.coordinates + m.velocities)
+
+    @property
+    def input_names(self) -> tuple[str, ...]:
+        return tuple(s.name for s in self.numeric.model.inputs)
+
+    @property
+    def output_names(self) -> tuple[str, ...]:
+        return tuple(s.name for s in self.numeric.model.outputs)
+
+    def derivatives(self, x, eta: float, p: float) -> np.ndarray:
+        """Right-hand side dx/dt = f(x, u)."""
+        return self.numeric.derivatives(self._p, np.asarray(x, float), (eta, p))
+
+    def outputs(self, x, eta: float, p: float) -> np.ndarray:
+        """Outputs (y_cb, xi, F_c)."""
+        return self.numeric.outputs(self._p, np.asarray(x, float), (eta, p))
+
+    def equilibrium(self, eta: float, p: float) -> np.ndarray:
+        """Static equilibrium state x0 for constant inputs (Levenberg-Marquardt solve)."""
+        return self.numeric.equilibrium(self._p, (eta, p))
+
+    def linearise(self, eta: float, p: float) -> LinearisedModel:
+        """Exact linearisation about the static equilibrium for (eta, p)."""
+        x0 = self.equilibrium(eta, p)
+        return self.numeric.linearise(self._p, x0, (eta, p))
+
+    def energy(self, x, eta: float, p: float) -> float:
+        """Total energy incl. the work potential of constant inputs (conserved without damping)."""
+        return self.numeric.energy(self._p, np.asarray(x, float), (eta, p))

@@ -1,0 +1,282 @@
+"""The symbolic models as fast Python functions: right-hand side, equilibrium, linearisation.
+
+This is the Python path for fitting scripts. It is compiled (``sympy.lambdify``) from the same
+:class:`~fmu_src.symbolic.MechanicalModel` as the C code of the FMUs, so the two paths share the
+equations but not the code that evaluates them.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+import sympy as sp
+from scipy import linalg, optimize
+
+from fmu_src.symbolic import MechanicalModel
+
+
+class ModelEvaluationError(ValueError):
+    """The model cannot be evaluated at this point (e.g. the linkage cannot close)."""
+
+
+@dataclass(frozen=True)
+class LinearisedModel:
+    """``dx/dt = A dx + B du``, ``y = y0 + C dx + D du`` about an equilibrium (thesis eq. 2.29-2.30).
+
+    Attributes
+    ----------
+    A, B, C, D : numpy.ndarray
+        State-space matrices (x = [q; v], u = inputs, y = outputs).
+    x0, u0, y0 : numpy.ndarray
+        Operating point: equilibrium state, inputs and outputs.
+    state_names, input_names, output_names : tuple of str
+    """
+
+    A: np.ndarray
+    B: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    x0: np.ndarray
+    u0: np.ndarray
+    y0: np.ndarray
+    state_names: tuple[str, ...]
+    input_names: tuple[str, ...]
+    output_names: tuple[str, ...]
+
+    @property
+    def eigenvalues(self) -> np.ndarray:
+        """Eigenvalues of A [1/s]."""
+        return np.linalg.eigvals(self.A)
+
+    @property
+    def natural_frequencies_hz(self) -> np.ndarray:
+        """Undamped natural frequencies |lambda| / 2 pi of the oscillatory modes, ascending [Hz]."""
+        ev = self.eigenvalues
+        return np.sort(np.abs(ev[ev.imag > 0]) / (2 * np.pi))
+
+    def to_control(self):
+        """The model as a ``control.StateSpace`` (deviations from the operating point)."""
+        import control
+
+        return control.ss(self.A, self.B, self.C, self.D, states=list(self.state_names),
+                          inputs=list(self.input_names), outputs=list(self.output_names))
+
+
+def _as_lists(expression):
+    """Matrices as nested lists (lambdify's math printer has no matrix type)."""
+    if isinstance(expression, sp.MatrixBase):
+        return expression.tolist()
+    if isinstance(expression, (list, tuple)):
+        return [_as_lists(e) for e in expression]
+    return expression
+
+
+class NumericModel:
+    """Numerical evaluation of a :class:`MechanicalModel` for a given parameter vector.
+
+    Parameters
+    ----------
+    model : MechanicalModel
+        The symbolic model.
+
+    Notes
+    -----
+    All methods take the parameter vector ``p`` in the order of ``model.parameters`` (see
+    :meth:`fmu_src.parameters.ParameterSet.vector`).
+    """
+
+    def __init__(self, model: MechanicalModel):
+        self.model = model
+        self.nq = len(model.q)
+        self.nu = len(model.u)
+        self.ny = len(model.outputs)
+
+    # --- compiled functions -----------------------------------------------------------------
+    def _compile(self, expression) -> callable:
+        deps = [d.symbol for d in self.model.dependents]
+        args = [self.model.p, self.model.q, self.model.v, self.model.u, deps]
+        return sp.lambdify(args, _as_lists(expression), modules="math", cse=True)
+
+    @cached_property
+    def _functions(self) -> dict:
+        m = self.model
+        drdq, drdv, drdu = m.forces_jacobian
+        dydq, dydv, dydu = m.outputs_jacobian
+        return {
+            "dependents": [self._compile(d.expression) for d in m.dependents],
+            "guards": [self._compile(g.expression) for g in m.guards],
+            "mass": self._compile(m.mass_matrix),
+            "mass_derivative": self._compile(m.mass_matrix_derivative),
+            "forces": self._compile(m.forces),
+            "forces_jacobian": self._compile([drdq, drdv, drdu]),
+            "outputs": self._compile(m.output_expressions),
+            "outputs_jacobian": self._compile([dydq, dydv, dydu]),
+            "energy": None if m.energy is None else self._compile(m.energy),
+        }
+
+    def dependents(self, p, q) -> list[float]:
+        """Values of the dependent quantities (e.g. phi2, phi3); raises if a guard fails."""
+        f = self._functions
+        nd = len(self.model.dependents)
+        v0, u0 = [0.0] * self.nq, [0.0] * self.nu
+        for guard, fun in zip(self.model.guards, f["guards"]):
+            if not fun(p, q, v0, u0, [0.0] * nd) >= 0:
+                values = {c.name: float(x) for c, x in zip(self.model.coordinates, q)}
+                raise ModelEvaluationError(guard.message.format(**values))
+        values: list[float] = []
+        for fun in f["dependents"]:
+            values.append(fun(p, q, v0, u0, values + [0.0] * (nd - len(values))))
+        return values
+
+    def _call(self, name: str, p, q, v=None, u=None):
+        v = [0.0] * self.nq if v is None else v
+        u = [0.0] * self.nu if u is None else u
+        deps = self.dependents(p, q)
+        return self._functions[name](p, q, v, u, deps)
+
+    def mass_matrix(self, p, q) -> np.ndarray:
+        """M(q)."""
+        return np.array(self._call("mass", p, q), dtype=float)
+
+    def forces(self, p, q, v, u) -> np.ndarray:
+        """r(q, v, u)."""
+        return np.array(self._call("forces", p, q, v, u), dtype=float).ravel()
+
+    def outputs(self, p, x, u) -> np.ndarray:
+        """y = h(q, v, u) for the state x = [q; v]."""
+        q, v = x[: self.nq], x[self.nq:]
+        return np.array(self._call("outputs", p, q, v, u), dtype=float).ravel()
+
+    def energy(self, p, x, u) -> float:
+        """Total mechanical energy (kinetic + potential + work potential of constant inputs)."""
+        q, v = x[: self.nq], x[self.nq:]
+        return float(self._call("energy", p, q, v, u))
+
+    def derivatives(self, p, x, u) -> np.ndarray:
+        """dx/dt = [v; M^-1 r]."""
+        q, v = x[: self.nq], x[self.nq:]
+        deps = self.dependents(p, q)
+        f = self._functions
+        mass = np.array(f["mass"](p, q, v, u, deps), dtype=float)
+        r = np.array(f["forces"](p, q, v, u, deps), dtype=float).ravel()
+        return np.concatenate([v, np.linalg.solve(mass, r)])
+
+    def jacobians(self, p, x, u) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Exact ``(df/dx, df/du, dh/dx, dh/du)`` at any state (not only at equilibria).
+
+        ``d(M^-1 r)/dq_k = M^-1 (dr/dq_k - dM/dq_k a)`` with ``a = M^-1 r``.
+        """
+        n = self.nq
+        q, v = np.asarray(x[:n], float), np.asarray(x[n:], float)
+        deps = self.dependents(p, q)
+        f = self._functions
+        mass = np.array(f["mass"](p, q, v, u, deps), dtype=float)
+        r = np.array(f["forces"](p, q, v, u, deps), dtype=float).ravel()
+        drdq, drdv, drdu = (np.array(a, dtype=float) for a in f["forces_jacobian"](p, q, v, u, deps))
+        dmdq = np.array(f["mass_derivative"](p, q, v, u, deps), dtype=float)
+        lu = linalg.lu_factor(mass)
+        acc = linalg.lu_solve(lu, r)
+        correction = np.stack([dmdq[k] @ acc for k in range(n)], axis=1)
+        A = np.zeros((2 * n, 2 * n))
+        A[:n, n:] = np.eye(n)
+        A[n:, :n] = linalg.lu_solve(lu, drdq - correction)
+        A[n:, n:] = linalg.lu_solve(lu, drdv)
+        B = np.zeros((2 * n, self.nu))
+        B[n:, :] = linalg.lu_solve(lu, drdu)
+        dydq, dydv, dydu = (np.array(a, dtype=float) for a in f["outputs_jacobian"](p, q, v, u, deps))
+        return A, B, np.hstack([dydq, dydv]), dydu
+
+    # --- equilibrium and linearisation -----------------------------------------------------
+    def initial_guess(self, p, u) -> np.ndarray:
+        """Starting point of the equilibrium solve (same rule as the C code's).
+
+        For the pantograph: delta = 0, xi = eta, and phi1 such that the cross bar is at eta.
+        """
+        guess = self.model.extra.get("initial_guess", {})
+        subs = dict(zip(self.model.p, p)) | dict(zip(self.model.u, u))
+        q = np.array([float(sp.sympify(guess.get("values", {}).get(s.name, 0)).subs(subs))
+                      for s in self.model.q])
+        if "bisect" not in guess:
+            return q
+        name, height, target, low, high = guess["bisect"]
+        k = [s.name for s in self.model.q].index(name)
+        height_of = self._compile(height)
+
+        def reach(value: float) -> float:
+            trial = q.copy()
+            trial[k] = value
+            return height_of(p, trial, [0.0] * self.nq, u, self.dependents(p, trial))
+
+        aim = float(sp.sympify(target).subs(subs))
+        high = self._largest_admissible(p, q, k, low, high)
+        h_low, h_high = reach(low), reach(high)
+        if (h_low - aim) * (h_high - aim) > 0:
+            raise ModelEvaluationError(f"no configuration reaches the height {aim:g} m "
+                                       f"(reachable: {h_low:g} m to {h_high:g} m)")
+        q[k] = optimize.brentq(lambda value: reach(value) - aim, low, high, xtol=1e-14)
+        return q
+
+    def _largest_admissible(self, p, q, k: int, low: float, high: float) -> float:
+        """Largest value of coordinate k in [low, high] where the guards hold (bisection)."""
+        def admissible(value: float) -> bool:
+            trial = q.copy()
+            trial[k] = value
+            try:
+                self.dependents(p, trial)
+                return True
+            except ModelEvaluationError:
+                return False
+
+        if admissible(high):
+            return high
+        if not admissible(low):
+            values = {c.name: float(x) for c, x in zip(self.model.coordinates, q)}
+            raise ModelEvaluationError(self.model.guards[0].message.format(**(values | {self.model.q[k].name: low})))
+        ok, bad = low, high
+        for _ in range(60):
+            mid = 0.5 * (ok + bad)
+            ok, bad = (mid, bad) if admissible(mid) else (ok, mid)
+        return ok
+
+    def equilibrium(self, p, u, q_guess=None, *, tolerance: float = 1e-10) -> np.ndarray:
+        """Static equilibrium ``r(q, 0, u) = 0`` by Levenberg-Marquardt (as fsolve in the thesis).
+
+        Returns the state x0 = [q0; 0]. Raises :class:`ModelEvaluationError` if it does not
+        converge.
+        """
+        zeros = np.zeros(self.nq)
+        if q_guess is None:
+            q_guess = self.initial_guess(p, u)
+
+        def residual(q):
+            try:
+                return self.forces(p, q, zeros, u)
+            except ModelEvaluationError:
+                return np.full(self.nq, 1e12)
+
+        def jacobian(q):
+            deps = self.dependents(p, q)
+            return np.array(self._functions["forces_jacobian"](p, q, zeros, u, deps)[0], float)
+
+        sol = optimize.root(residual, np.asarray(q_guess, float), jac=jacobian, method="lm",
+                            options={"xtol": 1e-14, "ftol": 1e-14})
+        scale = max(1.0, float(np.max(np.abs(self.forces(p, q_guess, zeros, u)))))
+        if not np.all(np.abs(residual(sol.x)) <= tolerance * scale):
+            raise ModelEvaluationError(
+                f"{self.model.name}: no static equilibrium found for inputs u = {list(u)} "
+                f"(residual {np.max(np.abs(residual(sol.x))):.3g}, {sol.message})"
+            )
+        return np.concatenate([sol.x, zeros])
+
+    def linearise(self, p, x0, u0) -> LinearisedModel:
+        """Exact linearisation (eqs. 2.27-2.30) about the state x0 and inputs u0."""
+        A, B, C, D = self.jacobians(p, x0, u0)
+        m = self.model
+        return LinearisedModel(
+            A=A, B=B, C=C, D=D, x0=np.asarray(x0, float), u0=np.asarray(u0, float),
+            y0=self.outputs(p, x0, u0),
+            state_names=tuple(s.name for s in m.coordinates + m.velocities),
+            input_names=tuple(s.name for s in m.inputs),
+            output_names=tuple(s.name for s in m.outputs),
+        )
