@@ -1,8 +1,8 @@
 """Simulation of the models on the Python path (SciPy's ``solve_ivp``).
 
-The inputs are sampled signals held constant between samples (zero-order hold), as a
-Co-Simulation master holds them over a communication step. The integration restarts at every
-sample so that the input steps do not spoil the error control.
+The inputs are sampled signals, linear between samples (as :mod:`build_fmu.simulate` feeds the
+FMUs) or held constant between samples (``interpolation="hold"``). The integration restarts at
+every sample so that the kinks or steps of the inputs do not spoil the error control.
 """
 from __future__ import annotations
 
@@ -21,6 +21,7 @@ def simulate_model(
     inputs: Mapping[str, np.ndarray | float],
     *,
     initial_state: np.ndarray | None = None,
+    interpolation: str = "linear",
     method: str = "LSODA",
     rtol: float = 1e-8,
     atol: float = 1e-10,
@@ -34,9 +35,11 @@ def simulate_model(
     time : array_like
         Strictly increasing output times [s]; inputs are sampled on the same grid.
     inputs : mapping
-        ``{"eta": array or constant, "p": array or constant}``, held constant between samples.
+        ``{"eta": array or constant, "p": array or constant}`` sampled at ``time``.
     initial_state : array_like, optional
         Initial state x = [q; v]; by default the static equilibrium for the first input sample.
+    interpolation : {"linear", "hold"}
+        Inputs between samples: linear interpolation or zero-order hold.
     method, rtol, atol
         Passed to :func:`scipy.integrate.solve_ivp`. The default LSODA switches to an implicit
         method with the exact Jacobian where the contact spring makes the problem stiff.
@@ -49,6 +52,8 @@ def simulate_model(
     time = np.asarray(time, dtype=float)
     if time.ndim != 1 or time.size < 2 or np.any(np.diff(time) <= 0):
         raise ValueError("time must be a strictly increasing 1-D array with at least two samples")
+    if interpolation not in ("linear", "hold"):
+        raise ValueError(f"interpolation must be 'linear' or 'hold', not {interpolation!r}")
     u = _input_matrix(model, inputs, time.size)
     x = model.equilibrium(*u[0]) if initial_state is None else np.asarray(initial_state, float)
     p = model.parameters.vector()
@@ -57,10 +62,15 @@ def simulate_model(
     outputs = np.empty((time.size, len(model.output_names)))
     states[0], outputs[0] = x, numeric.outputs(p, x, u[0])
     for k in range(time.size - 1):
-        uk = u[k]
+        t0, dt, u0 = time[k], time[k + 1] - time[k], u[k]
+        slope = (u[k + 1] - u[k]) / dt if interpolation == "linear" else 0.0 * u0
+
+        def inputs_at(t, t0=t0, u0=u0, slope=slope):
+            return u0 + (t - t0) * slope
+
         jacobian = {} if method in ("RK23", "RK45", "DOP853") else {
-            "jac": lambda t, z: numeric.jacobians(p, z, uk)[0]}
-        sol = solve_ivp(lambda t, z: numeric.derivatives(p, z, uk), (time[k], time[k + 1]), x,
+            "jac": lambda t, z: numeric.jacobians(p, z, inputs_at(t))[0]}
+        sol = solve_ivp(lambda t, z: numeric.derivatives(p, z, inputs_at(t)), (t0, time[k + 1]), x,
                         method=method, rtol=rtol, atol=atol, **jacobian)
         if not sol.success:
             raise RuntimeError(f"{model.name}: integration failed at t = {time[k]:g} s ({sol.message})")

@@ -1,0 +1,1 @@
+"""Catenary co-simulation (issue 3): not implemented yet."""

@@ -1,0 +1,1 @@
+"""The ``panto`` command line: one entry point for building FMUs and running the main job."""

@@ -1,0 +1,1 @@
+"""Video sidecar: marker tracking and PRBS synchronisation (issue 5): not implemented yet."""
