@@ -10,11 +10,16 @@ from .build import build_fmu, derive_instantiation_token, make_fmu_file_name
 from .compile import CompilationError
 from .units import UnitDefinition, divide_unit_by_time, parse_unit
 from .validate import validate_fmu
+from .simulate import FmuSimulator, SimulationError, UnknownVariableError, simulate_fmu_with_inputs
 from .variables import FmuVariable, layout_variables
 
 __all__ = [
     "CompilationError",
+    "FmuSimulator",
     "FmuVariable",
+    "SimulationError",
+    "UnknownVariableError",
+    "simulate_fmu_with_inputs",
     "UnitDefinition",
     "build_fmu",
     "derive_instantiation_token",

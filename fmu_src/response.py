@@ -200,6 +200,11 @@ class TimeResponse:
         """Number of samples."""
         return int(self.time.size)
 
+    def __reduce__(self) -> tuple[Any, ...]:
+        """Pickle (e.g. to return from a process-pool worker) through the constructor."""
+        return (type(self), (np.array(self.time), dict(self.signals), dict(self.units),
+                             dict(self.metadata)))
+
     def __repr__(self) -> str:
         span = (f"t = {self.time[0]:g} … {self.time[-1]:g} s" if self.time.size
                 else "no samples")
