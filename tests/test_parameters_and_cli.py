@@ -1,0 +1,97 @@
+"""Parameter sets as data, the oscillators' friction, and the command line."""
+import json
+
+import numpy as np
+import pytest
+
+from fmu_src.models import Model, default_parameters, load_parameters
+from fmu_src.parameters import ParameterError
+from panto.cli import main
+
+
+def test_parameter_file_round_trip_keeps_values_units_and_provenance(tmp_path):
+    params = default_parameters("Pantograph").with_values(k_ph=50000.0, m_c=7.5)
+    path = params.save(tmp_path / "p.json")
+    data = json.loads(path.read_text())
+    assert data["parameters"]["m1"]["unit"] == "kg"
+    assert "Table 4.1" in data["parameters"]["m1"]["provenance"]
+    loaded = load_parameters(path)
+    assert loaded.model == "Pantograph"
+    assert np.array_equal(loaded.vector(), params.vector())
+
+
+@pytest.mark.parametrize("changes,message", [
+    ({"m1": -1.0}, "'m1' = -1 kg is outside"),
+    ({"k": float("nan")}, "not finite"),
+    ({"unilateral_contact": 0.5}, "switch"),
+    ({"no_such": 1.0}, "unknown parameter"),
+], ids=["negative-mass", "nan", "switch", "unknown"])
+def test_invalid_values_are_refused_with_a_clear_error(changes, message):
+    with pytest.raises(ParameterError, match=message):
+        default_parameters("Pantograph").with_values(changes)
+
+
+def test_file_errors_name_the_file(tmp_path):
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"model": "Pantograph", "parameters": {"m_c": {"value": -3}}}')
+    with pytest.raises(ParameterError, match="bad.json.*m_c"):
+        load_parameters(bad)
+    other = tmp_path / "other.json"
+    default_parameters("TwoMass").save(other)
+    with pytest.raises(ParameterError, match="for model 'TwoMass'"):
+        load_parameters(other, "Pantograph")
+
+
+def test_a_linkage_that_cannot_close_is_refused():
+    with pytest.raises(ParameterError, match="cannot close"):
+        Model("Pantograph", {"l3": 5.0})
+
+
+def test_coulomb_friction_acts_against_the_velocity():
+    """eq. 2.35 smoothed: the friction force on mass 1 is -F_f tanh(v / v_eps)."""
+    plain = Model("TwoMass")
+    rough = Model("TwoMass", {"F_f1": 20.0, "v_eps": 1e-3})
+    x = np.array([0.0, 0.0, 0.2, 0.0])  # mass 1 moving up at 0.2 m/s
+    difference = rough.derivatives(x, 0.0, 0.0) - plain.derivatives(x, 0.0, 0.0)
+    assert difference[2] == pytest.approx(-20.0 * np.tanh(200.0) / 15.0)
+    assert np.allclose(difference[[0, 1, 3]], 0.0)
+
+
+def test_two_mass_linearisation_is_the_thesis_state_space():
+    """Eq. 2.33 (with the contact spring's -k_E/m2 on x2, which the printed matrix omits)."""
+    p = default_parameters("TwoMass")
+    m1, m2, k1, k2, c1, c2, kE = (p[n] for n in ("m1", "m2", "k1", "k2", "c1", "c2", "k_E"))
+    lin = Model("TwoMass").linearise(0.0, 0.0)
+    order = [0, 2, 1, 3]  # ours: [x1, x2, v1, v2]; thesis: [x1, v1, x2, v2]
+    A = lin.A[np.ix_(order, order)]
+    expected = np.array([
+        [0, 1, 0, 0],
+        [-(k1 + k2) / m1, -(c1 + c2) / m1, k2 / m1, c2 / m1],
+        [0, 0, 0, 1],
+        [k2 / m2, c2 / m2, -(k2 + kE) / m2, -c2 / m2]])
+    np.testing.assert_allclose(A, expected, rtol=1e-12)
+    assert lin.B[order][3, 0] == pytest.approx(kE / m2)  # wire pushes the head up
+
+
+def test_cli_linearise_writes_json(tmp_path, capsys):
+    out = tmp_path / "lin.json"
+    assert main(["linearise", "--eta", "2.0", "--p", "4.0", "--json", str(out)]) == 0
+    result = json.loads(out.read_text())
+    assert result["outputs"]["F_c"] == pytest.approx(81.1, abs=0.1)
+    assert len(result["A"]) == 6
+    assert "modes" in capsys.readouterr().out
+
+
+def test_cli_reports_bad_input_without_a_traceback(tmp_path, capsys):
+    assert main(["linearise", "--eta", "9.0"]) == 2
+    assert "reachable" in capsys.readouterr().err
+
+
+def test_quick_demo_writes_the_plot_csv_and_summary(tmp_path):
+    assert main(["demo", "--quick", "--out", str(tmp_path)]) == 0
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["invalid_fmus"] == []
+    assert (tmp_path / "pantograph_rig_run.png").stat().st_size > 10_000
+    header = (tmp_path / "pantograph_rig_run.csv").read_text().splitlines()[0]
+    assert "F_c [N]" in header
+    assert summary["linear_vs_nonlinear_fit_percent"]["F_c"] > 90.0
