@@ -85,9 +85,11 @@ class LogRecorder:
 class Instance:
     """A thin version-independent driver of one fmpy instance of a toy FMU."""
 
-    def __init__(self, fmu: BuiltFmu, interface: str = "CoSimulation") -> None:
+    def __init__(self, fmu: BuiltFmu, interface: str = "CoSimulation",
+                 debug_logging: bool = False) -> None:
         self.fmu, self.vr, self.log = fmu, fmu.vr, LogRecorder()
-        self.raw = instantiate_fmu(fmu.unzipdir, fmu.description, interface, logger=self.log)
+        self.raw = instantiate_fmu(fmu.unzipdir, fmu.description, interface, logger=self.log,
+                                   debug_logging=debug_logging)
         self.time = 0.0
 
     def set(self, **values: float) -> None:
@@ -538,4 +540,35 @@ def test_unreachable_equilibrium_fails_initialisation_with_the_model_message(fmu
     instance.raw.reset()  # the instance can be reused after a reset
     instance.initialize()
     assert instance.get("x")[0] == pytest.approx(analytic_equilibrium(DEFAULTS, 0.01, 4.0))
+    instance.close()
+
+
+@pytest.mark.parametrize("version", VERSIONS, ids=lambda v: f"fmi{v}")
+def test_root_cause_of_a_failure_is_in_the_last_message(fmus, version):
+    """Importers such as libcosim show only the last message, even with debug logging on."""
+    instance = Instance(fmus[version, "nonlinear"], debug_logging=True).initialize(
+        start_in_equilibrium=False, z=0.0, x_max=0.02)
+    with pytest.raises(FMICallException):
+        for _ in range(100):
+            instance.step(1e-3)
+    assert "-> Error" in instance.log.messages[-1]
+    assert "the mass left its travel" in instance.log.messages[-1]
+    instance.close()
+
+
+@pytest.mark.parametrize("version", VERSIONS, ids=lambda v: f"fmi{v}")
+def test_failed_linearisation_is_reported_once_in_the_error_state(fmus, version):
+    instance = Instance(fmus[version, "linear"])
+    with pytest.raises(FMICallException):
+        instance.initialize(x_max=0.001)  # the operating point lies outside the travel
+    last = instance.log.messages[-1]
+    assert "cannot linearise" in last and "the mass left its travel" in last
+    count = len(instance.log.messages)
+    for _ in range(3):
+        with pytest.raises(FMICallException):
+            instance.get("F_c")
+    assert len(instance.log.messages) == count  # no new equilibrium solve, no repeated message
+    instance.raw.reset()  # a reset forgets the failure
+    instance.initialize()
+    assert np.isfinite(instance.get("F_c")[0])
     instance.close()

@@ -151,7 +151,11 @@ void core_set_mode(CoreInstance *instance, CoreMode mode) {
 }
 
 CoreStatus core_fail(CoreInstance *instance) {
-    core_set_mode(instance, CORE_MODE_ERROR);
+    if (instance->mode == CORE_MODE_ERROR) return CORE_ERROR;
+    core_log(instance, CORE_OK, "logEvents", "%s -> %s: %s", core_mode_name(instance->mode),
+             core_mode_name(CORE_MODE_ERROR),
+             instance->last_error[0] ? instance->last_error : "(no message)");
+    instance->mode = CORE_MODE_ERROR;
     return CORE_ERROR;
 }
 
@@ -160,6 +164,7 @@ void core_touch(CoreInstance *instance) { instance->cache_valid = 0; }
 void core_invalidate_parameters(CoreInstance *instance) {
     instance->parameters_checked = 0;
     instance->linearisation_valid = 0;
+    instance->prepare_failed = 0;
     instance->initial_state_valid = 0;
     instance->cache_valid = 0;
 }

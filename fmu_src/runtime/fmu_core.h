@@ -147,6 +147,7 @@ typedef struct CoreInstance {
     int parameters_checked;      /* model_check_parameters passed for the current p */
     int linearisation_valid;     /* q0, y0, A, B, C, D belong to the current p, u0 */
     double *q0, *y0, *a_matrix, *b_matrix, *c_matrix, *d_matrix;
+    int prepare_failed;          /* core_prepare failed for the current p, u0 (reported once) */
     int cache_valid;             /* derivatives and outputs belong to the current x, u, p */
     double *cached_derivatives, *cached_outputs;
     int initial_state_valid;     /* initial_x belongs to the current u, p (start in equilibrium) */
@@ -161,6 +162,7 @@ typedef struct CoreInstance {
     CoreWorkspace work;
     char model_message[MODEL_MESSAGE_LENGTH]; /* written by the model functions */
     char last_error[CORE_LOG_LENGTH];          /* the last error logged (or suppressed) */
+    char prepare_failure[CORE_LOG_LENGTH];     /* why core_prepare failed (prepare_failed) */
     int errors_suppressed;  /* set while the integrator tries a sub-step it may reject */
 } CoreInstance;
 
@@ -197,7 +199,9 @@ const char *core_mode_name(CoreMode mode);
 int core_check_mode(const CoreInstance *instance, const char *function, unsigned int allowed);
 /* Change the state machine's mode (logged in category logEvents). */
 void core_set_mode(CoreInstance *instance, CoreMode mode);
-/* Enter the error mode (after a failed computation) and return CORE_ERROR. */
+/* Enter the error mode (after a failed computation) and return CORE_ERROR. The mode change is
+ * logged with the cause (last_error) folded in, because importers such as libcosim show only
+ * the last message; nothing is logged if the instance is already in the error mode. */
 CoreStatus core_fail(CoreInstance *instance);
 
 CoreStatus core_get_real(CoreInstance *instance, const char *function,
@@ -235,7 +239,9 @@ int core_lu_factor(double *matrix, int n, int *pivots);
 /* Solve LU x = b in place (b becomes x). */
 void core_lu_solve(const double *lu, int n, const int *pivots, double *b);
 
-/* Check parameters and (linearised models) refresh the linearisation if needed. */
+/* Check parameters and (linearised models) refresh the linearisation if needed. A failure is
+ * logged once and kept until the parameters or the operating point change (or a reset): later
+ * calls return CORE_ERROR at once, with the cause restored to last_error but not logged again. */
 CoreStatus core_prepare(CoreInstance *instance);
 /* dx/dt and y at state x and the current inputs; dx or y may be NULL. */
 CoreStatus core_evaluate(CoreInstance *instance, const double *x, double *dx, double *y);

@@ -235,7 +235,7 @@ static CoreStatus compute_linearisation(CoreInstance *s) {
     const int nq = s->nq, nx = s->nx, nu = s->nu, ny = s->ny, ld = s->nx + s->nu;
     if (solve_equilibrium(s, s->u0, s->q0) != CORE_OK) {
         core_log_error(s, "cannot linearise model %s: no static equilibrium at the operating "
-                       "point", MODEL_IDENTIFIER);
+                       "point: %s", MODEL_IDENTIFIER, s->last_error);
         return CORE_ERROR;
     }
     double *point = s->work.point;
@@ -257,7 +257,7 @@ static CoreStatus compute_linearisation(CoreInstance *s) {
     return CORE_OK;
 }
 
-CoreStatus core_prepare(CoreInstance *s) {
+static CoreStatus check_and_linearise(CoreInstance *s) {
     if (!s->parameters_checked) {
         s->model_message[0] = '\0';
         if (model_check_parameters(s->p, s->model_message) != 0) {
@@ -270,6 +270,19 @@ CoreStatus core_prepare(CoreInstance *s) {
     }
     if (s->linearised && !s->linearisation_valid) return compute_linearisation(s);
     return CORE_OK;
+}
+
+CoreStatus core_prepare(CoreInstance *s) {
+    if (s->prepare_failed) { /* logged when it happened: no second equilibrium solve, no log */
+        memcpy(s->last_error, s->prepare_failure, sizeof(s->last_error));
+        return CORE_ERROR;
+    }
+    const CoreStatus status = check_and_linearise(s);
+    if (status != CORE_OK && !s->errors_suppressed) {
+        memcpy(s->prepare_failure, s->last_error, sizeof(s->prepare_failure));
+        s->prepare_failed = 1;
+    }
+    return status;
 }
 
 /* ---- dynamics and Jacobian ------------------------------------------------------------- */
