@@ -122,7 +122,7 @@ def linkage() -> dict:
 
 def _centroids(kin: dict) -> list[tuple[sp.Expr, sp.Expr, sp.Expr]]:
     """(x, y, rotation angle) of each bar's centroid (reference page conventions)."""
-    phi1, delta, phi2, phi3 = kin["phi1"], kin["delta"], kin["phi2"], kin["phi3"]
+    phi1, phi2, phi3 = kin["phi1"], kin["phi2"], kin["phi3"]
     l1, c, d, alpha = _symbols("l1 c d alpha")
     s1, s2, s3, s4 = _symbols("s1 s2 s3 s4")
     ax, ay = -l1 * sp.cos(phi1), l1 * sp.sin(phi1)  # elbow A
