@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import logging
 import sys
@@ -101,7 +102,15 @@ def _parser() -> tuple[argparse.ArgumentParser, dict[str, Callable]]:
     p = add("demo", run_demo, "the main job: build the FMUs and simulate a rig run")
     p.add_argument("--out", default="out", help="output folder (default: out)")
     p.add_argument("--quick", action="store_true", help="reduced version (seconds)")
+
+    for module in _COMMAND_MODULES:
+        importlib.import_module(module).register(add)
     return parser, handlers
+
+
+# Subcommands of the later packages live beside this file, one module per package; each module
+# has ``register(add)`` where ``add(name, handler, help) -> ArgumentParser`` declares a subcommand.
+_COMMAND_MODULES = ("panto.commands_cosim", "panto.commands_rig")
 
 
 def main(argv: list[str] | None = None) -> int:
