@@ -8,6 +8,11 @@ bellow torque k_p p on phi1. Conventions: ``reference/pantograph_model.md``.
 Generalised coordinates q = (phi1, delta, xi); the equations of motion follow from the Lagrangian
 (2.22) with Rayleigh dissipation (2.24, damper names of section 4.5) via the Euler-Lagrange
 equations (2.23), derived here with SymPy (the thesis used Maple).
+
+Three extensions, all zero by default so that the defaults are the thesis model: Coulomb friction in
+the lower-arm hinge (``T_f``), an angle-dependent bellow torque (``kappa_p``) and a cubic stiffening of
+the head suspension (``k_c3``). The virtual test bed uses them as rig imperfections and the diagnosis
+as candidate effects.
 """
 from __future__ import annotations
 
@@ -22,6 +27,8 @@ from fmu_src.symbolic import Dependent, Guard, MechanicalModel, lagrangian_force
 _T21 = "thesis Table 2.1 (dimensions of the test pantograph)"
 _T41 = "thesis Table 4.1 (identified, section 4.5)"
 _DEFAULT = "reference/pantograph_model.md default (not given by the thesis)"
+_EXTENSION = ("project extension for rig imperfections and diagnosis candidates; "
+              "0 reproduces the thesis model")
 
 PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec("l1", 1.600, "m", "lower arm length", 1e-3, 20.0, _T21),
@@ -49,6 +56,16 @@ PARAMETERS: tuple[ParameterSpec, ...] = (
     ParameterSpec("k_c", 21073.0, "N/m", "collector head suspension stiffness", 1e-3, 1e10, _T41),
     ParameterSpec("k_ph", 11931.0, "N/m", "carbon contact stiffness (EN 50318: 50000)", 0.0, 1e10, _T41),
     ParameterSpec("k_p", 260.0, "N.m/bar", "bellow torque per pressure", 0.0, 1e6, _T41 + " (text)"),
+    ParameterSpec("T_f", 0.0, "N.m", "Coulomb friction torque in the lower-arm hinge, T_f tanh(dphi1/omega_eps)",
+                  0.0, 1e5, _EXTENSION),
+    ParameterSpec("omega_eps", 1e-3, "rad/s", "angular velocity scale of the tanh-smoothed hinge friction",
+                  1e-9, 10.0, _EXTENSION),
+    ParameterSpec("kappa_p", 0.0, "1/rad", "angle dependence of the bellow torque, "
+                  "k_p p (1 + kappa_p (phi1 - phi1_ref))", -100.0, 100.0, _EXTENSION),
+    ParameterSpec("phi1_ref", 0.532, "rad", "lower-arm angle at which the bellow torque is k_p p",
+                  -pi, pi, _EXTENSION),
+    ParameterSpec("k_c3", 0.0, "N/m3", "cubic stiffening of the head suspension, k_c3 (xi - y_cb)^3",
+                  -1e12, 1e12, _EXTENSION),
     ParameterSpec(
         "unilateral_contact", 0.0, "1",
         "contact can only push (contact loss when xi < eta); thesis model is bilateral",
@@ -151,6 +168,7 @@ def derive_pantograph() -> MechanicalModel:
     m = _symbols("m1 m2 m3 m4")
     m_c, g, k, k_c, k_ph, k_p = _symbols("m_c g k k_c k_ph k_p")
     c1, c2, c3, c_c, unilateral = _symbols("c1 c2 c3 c_c unilateral_contact")
+    t_f, omega_eps, kappa_p, phi1_ref, k_c3 = _symbols("T_f omega_eps kappa_p phi1_ref k_c3")
     lengths = (l1, l2, l3, l4)
     q, v = [phi1, delta, xi], [dphi1, ddelta, dxi]
 
@@ -176,11 +194,15 @@ def derive_pantograph() -> MechanicalModel:
     y_cb = kin["y_cb"]
     dy_cb = sum(d(y_cb, qk) * vk for qk, vk in zip(q, v))
     dphi2 = sum(d(phi2, qk) * vk for qk, vk in zip(q, v))
-    potential += k * delta**2 / 2 + k_c * (xi - y_cb) ** 2 / 2
+    stroke = xi - y_cb  # head suspension deflection
+    potential += k * delta**2 / 2 + k_c * stroke**2 / 2 + k_c3 * stroke**4 / 4
     rayleigh = (c1 * dphi1**2 + c2 * ddelta**2 + c3 * dphi2**2 + c_c * (dxi - dy_cb) ** 2) / 2
     spring = k_ph * (xi - eta)
     contact = sp.Piecewise((0, sp.And(unilateral > sp.Rational(1, 2), xi < eta)), (spring, True))
-    external = sp.Matrix([k_p * p, 0, -contact])  # bellow torque on phi1, contact on xi
+    # Bellow torque on phi1 (optionally angle dependent), hinge friction, contact on xi.
+    bellow = k_p * p * (1 + kappa_p * (phi1 - phi1_ref))
+    friction = t_f * sp.tanh(dphi1 / omega_eps)
+    external = sp.Matrix([bellow - friction, 0, -contact])
     generalised = sp.Matrix(
         [-d(potential, qk) - sp.diff(rayleigh, vk) for qk, vk in zip(q, v)]
     ) + external
@@ -188,7 +210,8 @@ def derive_pantograph() -> MechanicalModel:
     forces = lagrangian_forces(mass, generalised, v, mass_derivative)
 
     kinetic = (sp.Matrix(v).T * mass * sp.Matrix(v))[0, 0] / 2
-    energy = kinetic + potential + k_ph * (xi - eta) ** 2 / 2 - k_p * p * phi1
+    bellow_work = k_p * p * (phi1 + kappa_p * (phi1 - phi1_ref) ** 2 / 2)  # integral of the torque
+    energy = kinetic + potential + k_ph * (xi - eta) ** 2 / 2 - bellow_work
     return MechanicalModel(
         name="Pantograph",
         description="Physically based high-speed pantograph (four-bar linkage, flexible thrust "

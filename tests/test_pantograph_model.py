@@ -114,8 +114,12 @@ def test_exact_jacobians_match_finite_differences_away_from_equilibrium():
         np.testing.assert_allclose(B[:, j], fd, rtol=1e-5, atol=1e-6 * np.max(np.abs(B)))
 
 
-def test_energy_is_conserved_without_damping():
-    undamped = {"c1": 0.0, "c2": 0.0, "c3": 0.0, "c_c": 0.0}
+@pytest.mark.parametrize("extension", [
+    {},
+    {"kappa_p": 0.8, "k_c3": 4e7},  # angle-dependent bellow torque and stiffening head suspension
+], ids=["thesis model", "with conservative extensions"])
+def test_energy_is_conserved_without_damping(extension):
+    undamped = {"c1": 0.0, "c2": 0.0, "c3": 0.0, "c_c": 0.0, **extension}
     model = Model("Pantograph", undamped)
     x0 = model.equilibrium(2.0, 4.0) + np.array([0.01, 0.0, 0.005, 0.0, 0.0, 0.1])
     time = np.linspace(0.0, 1.2, 13)
@@ -138,6 +142,35 @@ def test_with_damping_it_decays_to_the_equilibrium():
     energy = [model.energy(x, 2.0, 4.0) for x in (x0, final)]
     assert np.allclose(final, x_eq, atol=1e-6)
     assert energy[1] < energy[0]
+
+
+def test_hinge_friction_dissipates_exactly_its_work():
+    """E(t1) - E(0) = -integral of T_f tanh(dphi1 / omega_eps) dphi1 dt (only friction dissipates)."""
+    t_f, omega_eps = 15.0, 0.05
+    model = Model("Pantograph", {"c1": 0.0, "c2": 0.0, "c3": 0.0, "c_c": 0.0,
+                                 "T_f": t_f, "omega_eps": omega_eps})
+    x0 = model.equilibrium(2.0, 4.0) + np.array([0.0, 0.0, 0.0, 0.3, 0.0, 0.0])  # kick dphi1
+    time = np.linspace(0.0, 1.0, 2001)
+    response = simulate_model(model, time, {"eta": 2.0, "p": 4.0}, initial_state=x0,
+                              method="DOP853", rtol=1e-11, atol=1e-13)
+    states = np.column_stack([response[name] for name in model.state_names])
+    energy = np.array([model.energy(x, 2.0, 4.0) for x in states])
+    dphi1 = response["dphi1"]
+    power = t_f * np.tanh(dphi1 / omega_eps) * dphi1
+    dissipated = np.concatenate([[0.0], np.cumsum((power[1:] + power[:-1]) / 2 * np.diff(time))])
+    assert dissipated[-1] > 0.05 * (energy[0] - energy.min() + dissipated[-1])  # friction matters
+    np.testing.assert_allclose(energy - energy[0], -dissipated, atol=2e-3 * dissipated[-1])
+
+
+def test_angle_dependent_bellow_torque_equals_a_scaled_pressure():
+    """With kappa_p the equilibrium is that of the thesis model at p (1 + kappa_p (phi1 - phi1_ref))."""
+    kappa, phi1_ref = 0.6, 0.45
+    extended = Model("Pantograph", {"kappa_p": kappa, "phi1_ref": phi1_ref})
+    x_ext = extended.equilibrium(2.0, 4.0)
+    scaled_pressure = 4.0 * (1 + kappa * (x_ext[0] - phi1_ref))
+    x_nominal = Model("Pantograph").equilibrium(2.0, scaled_pressure)
+    np.testing.assert_allclose(x_ext, x_nominal, atol=1e-9)
+    assert abs(scaled_pressure - 4.0) > 0.1  # the extension really changed the torque
 
 
 def test_unilateral_contact_releases_the_wire():
