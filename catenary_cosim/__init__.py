@@ -1,1 +1,5 @@
-"""Catenary co-simulation (issue 3): not implemented yet."""
+"""Catenary co-simulation: a finite-difference overhead contact line driven against pantograph FMUs."""
+from catenary_cosim.catenary import Catenary
+from catenary_cosim.lines import LINE_NAMES, LineDefinition, Wire, load_line
+
+__all__ = ["Catenary", "LINE_NAMES", "LineDefinition", "Wire", "load_line"]
