@@ -1,7 +1,10 @@
 """Build and validate all of the project's FMUs (what ``panto build-fmu`` does)."""
 from __future__ import annotations
 
+import hashlib
 import logging
+import os
+import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -72,3 +75,52 @@ def build_project_fmus(
             built.append(BuiltFmu(name, version, path, problems, time.perf_counter() - start))
             start = time.perf_counter()
     return built
+
+
+# --- project FMUs built on demand into a cache ---------------------------------------------------
+
+#: Environment variable naming the FMU cache folder (default ``~/.cache/panto/fmus``).
+CACHE_VARIABLE = "PANTO_FMU_CACHE"
+
+
+def _source_digest() -> str:
+    """Hash of the model and FMU-builder sources: a new cache folder when they change."""
+    root = Path(__file__).resolve().parent.parent  # the source tree (editable install)
+    digest = hashlib.sha256()
+    for folder in ("fmu_src", "build_fmu"):
+        for path in sorted((root / folder).rglob("*")):
+            if path.is_file() and path.suffix in (".py", ".c", ".h"):
+                digest.update(path.relative_to(root).as_posix().encode())
+                digest.update(path.read_bytes())
+    return digest.hexdigest()[:12]
+
+
+def default_cache_dir() -> Path:
+    """``$PANTO_FMU_CACHE`` or ``~/.cache/panto/fmus``, in a sub-folder per source version."""
+    base = os.environ.get(CACHE_VARIABLE) or Path.home() / ".cache" / "panto" / "fmus"
+    return Path(base) / _source_digest()
+
+
+def project_fmu(name: str, *, cache_dir: str | Path | None = None,
+                progress: Callable[[str], None] | None = None) -> Path:
+    """The FMI 2.0 FMU of a project model, built into the cache folder if not there yet.
+
+    Built in a temporary folder and moved into place, so parallel workers never see half a
+    file.
+    """
+    if name not in FMU_NAMES:
+        raise ValueError(f"unknown project FMU {name!r}; choose one of {list(FMU_NAMES)}")
+    folder = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+    target = folder / f"{name}.fmu"
+    if target.exists():
+        return target
+    folder.mkdir(parents=True, exist_ok=True)
+    if progress:
+        progress(f"building the {name} FMU into {folder}")
+    with tempfile.TemporaryDirectory(dir=folder) as scratch:
+        built = build_project_fmus(scratch, names=[name], fmi_versions=(2,))
+        problems = [p for b in built for p in b.problems]
+        if problems:
+            raise RuntimeError(f"the {name} FMU did not validate: {problems}")
+        os.replace(built[0].path, target)
+    return target

@@ -1,8 +1,185 @@
-"""``panto rig``: the rig sidecar and the virtual test bed (issue 4)."""
+"""``panto rig``: the rig sidecar and the virtual test bed (issue 4).
+
+``panto rig run PROFILE`` plays a profile on the virtual test bed (default) or on a real rig
+(``--interface``/``--channel`` for the CAN bus and ``--io MODULE:FACTORY`` for the analogue I/O);
+``panto rig emulate`` serves the emulated drive and plant on a CAN bus in real time;
+``panto rig profile`` renders a profile to a plot and CSV before it is run;
+``panto rig check`` checks a dataset against the schema and summarises it.
+"""
 from __future__ import annotations
 
+import argparse
+import importlib
+import json
+from pathlib import Path
 from typing import Callable
 
 
+def _say(line: str) -> None:
+    print(line, flush=True)
+
+
+def _imperfections(text: str):
+    from rig.imperfections import RigImperfections
+
+    if text == "none":
+        return RigImperfections.none()
+    if text == "default":
+        return RigImperfections()
+    path = Path(text)
+    try:
+        values = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as error:
+        raise ValueError(f"--imperfections {text}: not 'none', 'default' or a readable JSON "
+                         f"file ({error})") from None
+    return RigImperfections.from_dict(values)
+
+
+def _pantograph_fmu(args: argparse.Namespace) -> Path:
+    if args.fmu:
+        return Path(args.fmu)
+    from build_fmu.project import project_fmu
+
+    return project_fmu("Pantograph", progress=_say)
+
+
+def run_rig_run(args: argparse.Namespace) -> int:
+    """Play a profile and record the run."""
+    from rig.profiles import load_profile
+    from rig.recorder import new_run_folder
+    from rig.session import RunOptions
+
+    profile = load_profile(args.profile)
+    if args.duration is not None:
+        from dataclasses import replace
+
+        profile = replace(profile, duration=args.duration)
+    folder = Path(args.folder) if args.folder else new_run_folder(args.out)
+    options = RunOptions(formats=tuple(args.formats), notes=args.notes or "")
+    if args.interface:
+        result = _run_on_rig(args, profile, folder, options)
+    elif args.realtime:
+        from rig.realtime import run_virtual_profile_realtime
+
+        result = run_virtual_profile_realtime(
+            profile, fmu_path=_pantograph_fmu(args), folder=folder,
+            imperfections=_imperfections(args.imperfections), seed=args.seed, options=options,
+            progress=_say)
+    else:
+        from rig.virtual import run_virtual_profile
+
+        result = run_virtual_profile(
+            profile, fmu_path=_pantograph_fmu(args), folder=folder,
+            imperfections=_imperfections(args.imperfections), seed=args.seed, options=options,
+            progress=_say)
+    _say(f"{result.samples} samples, {result.late_cycles} late cycles; status: {result.status}")
+    return 0 if result.success else 1
+
+
+def _run_on_rig(args: argparse.Namespace, profile, folder: Path, options):
+    """The real rig: the CAN interface by configuration, the analogue I/O from a user factory."""
+    from rig.clock import RealClock
+    from rig.drive import LinearMotorDriver
+    from rig.session import run_profile
+
+    if not args.io:
+        raise ValueError("a real rig needs --io MODULE:FACTORY: a function returning the rig's "
+                         "analogue I/O (an object with read_sensors(now), write_valve_voltage(v), "
+                         "write_led(bit); see rig.session.RigIO)")
+    module_name, _, factory_name = args.io.partition(":")
+    try:
+        factory = getattr(importlib.import_module(module_name), factory_name)
+    except (ImportError, AttributeError) as error:
+        raise ValueError(f"--io {args.io}: cannot load the I/O factory ({error})") from None
+    clock = RealClock()
+    with LinearMotorDriver.open(args.interface, args.channel, clock=clock,
+                                node_id=args.node_id,
+                                position_limits=(profile.limits.motor_min,
+                                                 profile.limits.motor_max)) as driver:
+        return run_profile(profile, driver=driver, io=factory(), clock=clock, folder=folder,
+                           options=options, progress=_say)
+
+
+def run_rig_emulate(args: argparse.Namespace) -> int:
+    """Serve the emulated drive (with the plant behind it) on a CAN bus in real time."""
+    from rig.realtime import serve_emulator
+
+    serve_emulator({"interface": args.interface, "channel": args.channel},
+                   fmu_path=_pantograph_fmu(args), duration=args.duration, progress=_say)
+    return 0
+
+
+def run_rig_profile(args: argparse.Namespace) -> int:
+    """Render a profile (demand, conditioned command, pressure, LED) to CSV and a plot."""
+    from rig.profile_preview import preview_profile
+
+    written = preview_profile(args.profile, out=Path(args.out))
+    for path in written:
+        _say(f"wrote {path}")
+    return 0
+
+
+def run_rig_check(args: argparse.Namespace) -> int:
+    """Check a dataset against the schema; print its channels and status."""
+    from rig.dataset import REQUIRED_CHANNELS, read_dataset
+
+    data = read_dataset(args.dataset, required=() if args.any_channels else REQUIRED_CHANNELS)
+    _say(f"{args.dataset}: {len(data)} samples at {data.metadata.sample_rate:g} Hz, "
+         f"{data.time[-1] - data.time[0]:.3f} s, source {data.metadata.source}, "
+         f"status {data.metadata.status}")
+    for name in data.names:
+        values = data[name]
+        _say(f"  {name:>16} [{data.units[name]}]  min {values.min():.6g}  max {values.max():.6g}")
+    for warning in data.warnings:
+        _say(f"  warning: {warning}")
+    return 0
+
+
 def register(add: Callable) -> None:
-    """Declare this package's subcommands with ``add(name, handler, help)``."""
+    """Declare ``panto rig`` with its sub-subcommands."""
+    rig = add("rig", _dispatch, "rig sidecar: run a profile, emulate the rig, preview, check")
+    sub = rig.add_subparsers(dest="rig_command", required=True)
+
+    p = sub.add_parser("run", help="play a profile and record the run (virtual test bed unless "
+                                   "--interface is given)")
+    p.set_defaults(rig_handler=run_rig_run)
+    p.add_argument("profile", help="profile file (JSON), e.g. rig/profiles/aprbs_training.json")
+    p.add_argument("--out", default="runs", help="folder of numbered runs (default: runs)")
+    p.add_argument("--folder", help="exact run folder (refused if it holds a run)")
+    p.add_argument("--duration", type=float, help="override the profile's duration [s]")
+    p.add_argument("--formats", nargs="*", default=["parquet", "mat"], choices=("parquet", "mat"),
+                   help="copies written beside the incremental CSV")
+    p.add_argument("--notes", help="free text stored in the run's metadata")
+    p.add_argument("--fmu", help="pantograph FMU of the virtual test bed (default: built)")
+    p.add_argument("--imperfections", default="default",
+                   help="'default' (the rig as the thesis describes it), 'none', or a JSON file")
+    p.add_argument("--seed", type=int, default=0, help="seed of the emulated sensor noise")
+    p.add_argument("--realtime", action="store_true",
+                   help="emulate against the wall clock instead of in lock step")
+    p.add_argument("--interface", help="python-can interface of a real rig (e.g. socketcan, pcan)")
+    p.add_argument("--channel", help="CAN channel of a real rig (e.g. can0)")
+    p.add_argument("--node-id", type=int, default=63, help="the drive's CANopen node id")
+    p.add_argument("--io", help="MODULE:FACTORY returning the real rig's analogue I/O")
+
+    p = sub.add_parser("emulate", help="serve the emulated drive and plant on a CAN bus")
+    p.set_defaults(rig_handler=run_rig_emulate)
+    p.add_argument("--interface", default="udp_multicast",
+                   help="python-can interface shared with the master (default udp_multicast)")
+    p.add_argument("--channel", default=None, help="CAN channel (interface default if omitted)")
+    p.add_argument("--fmu", help="pantograph FMU (default: built)")
+    p.add_argument("--duration", type=float, help="stop after this many seconds")
+
+    p = sub.add_parser("profile", help="render a profile to CSV and a plot before running it")
+    p.set_defaults(rig_handler=run_rig_profile)
+    p.add_argument("profile")
+    p.add_argument("--out", default="profile_preview", help="output folder")
+
+    p = sub.add_parser("check", help="check a dataset against the schema and summarise it")
+    p.set_defaults(rig_handler=run_rig_check)
+    p.add_argument("dataset", help="run folder or .csv/.parquet/.mat file")
+    p.add_argument("--any-channels", action="store_true",
+                   help="do not require the rig's standard channels")
+
+
+def _dispatch(args: argparse.Namespace) -> int:
+    return args.rig_handler(args)

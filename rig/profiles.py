@@ -69,8 +69,12 @@ class SafetyLimits:
     pressure_max: float = 7.5
 
     def __post_init__(self) -> None:
-        MotorLimits(position_min=self.motor_min, position_max=self.motor_max,
-                    max_step=self.motor_max_step)
+        if not (math.isfinite(self.motor_min) and math.isfinite(self.motor_max)
+                and self.motor_min < self.motor_max):
+            raise ValueError(f"motor_max = {self.motor_max!r}: must be finite and above "
+                             f"motor_min = {self.motor_min!r}")
+        if not (math.isfinite(self.motor_max_step) and self.motor_max_step > 0.0):
+            raise ValueError(f"motor_max_step = {self.motor_max_step!r}: must be > 0 m")
         if not (0.0 <= self.pressure_min < self.pressure_max <= 10.0):
             raise ValueError(f"pressure_max = {self.pressure_max!r}: need 0 <= pressure_min "
                              f"({self.pressure_min!r}) < pressure_max <= 10 bar (supply)")

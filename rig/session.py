@@ -92,6 +92,8 @@ class RunResult:
     late_cycles: int
     lateness_p99: float
     lateness_max: float
+    clock_origin: float = math.nan
+    """Clock time [s] of the dataset's t = 0 (NaN if the drive never started)."""
 
     @property
     def success(self) -> bool:
@@ -110,6 +112,7 @@ class _Loop:
         self.feedback = None
         self.row: dict[str, float] = {}
         self.time = 0.0
+        self.clock_origin = math.nan
 
     def _wait(self) -> Mapping[str, float]:
         self.lateness.append(self.ticker.wait())
@@ -141,6 +144,7 @@ class _Loop:
                                             self.profile.limits.motor_limits(),
                                             initial_position=position)
         self.ticker = Ticker(self.clock, self.dt)  # deadlines from the end of the start-up
+        self.clock_origin = self.clock.now() + self.dt  # clock time of the run's t = 0
         sensors = self.io.read_sensors(self.clock.now())
         opts = self.options.pressure_controller
         self.controller = PressureController(opts, initial_voltage=_holding_voltage(sensors))
@@ -239,6 +243,7 @@ def run_profile(profile: Profile, *, driver: LinearMotorDriver, io: RigIO, clock
     except BaseException as error:  # keep what is recorded, mark why it stopped, re-raise
         recorder.abort(f"{type(error).__name__}: {error}", at=loop.time)
         loop.stop_drive()
+        error.add_note(f"the run up to t = {loop.time:.3f} s is recorded in {folder}")
         raise
     loop.stop_drive()
     reached = loop.settle() if fault is not None and loop.lateness else True
@@ -251,7 +256,8 @@ def run_profile(profile: Profile, *, driver: LinearMotorDriver, io: RigIO, clock
         status = f"aborted: {reason}"
     if progress:
         progress(f"run {status}; data in {status_path}")
-    return _result(Path(folder), status, recorder.rows_written, fault, loop.lateness, loop.dt)
+    return _result(Path(folder), status, recorder.rows_written, fault, loop.lateness, loop.dt,
+                   loop.clock_origin)
 
 
 def _fault_reason(fault: RigError, time: float, reached: bool, safe: float) -> str:
@@ -263,7 +269,7 @@ def _fault_reason(fault: RigError, time: float, reached: bool, safe: float) -> s
 
 
 def _result(folder: Path, status: str, rows: int, fault: RigError | None,
-            lateness: list[float], dt: float) -> RunResult:
+            lateness: list[float], dt: float, clock_origin: float) -> RunResult:
     late = [x for x in lateness if x > 0.5 * dt]
     ordered = sorted(lateness) or [0.0]
     return RunResult(
@@ -271,4 +277,4 @@ def _result(folder: Path, status: str, rows: int, fault: RigError | None,
         fault_code=getattr(fault, "code", None) if fault else None,
         fault_meaning=getattr(fault, "meaning", str(fault)) if fault else None,
         late_cycles=len(late), lateness_p99=ordered[int(0.99 * (len(ordered) - 1))],
-        lateness_max=max(ordered), )
+        lateness_max=max(ordered), clock_origin=clock_origin)

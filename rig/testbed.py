@@ -33,8 +33,10 @@ from rig.pneumatics import ValveParameters, ValvePlant
 #: Sensor channels of a sample, with units.
 SENSOR_UNITS = {"force": "N", "pressure": "bar", "laser_1": "m", "laser_2": "m"}
 #: Hidden quantities of a sample, with units.
-TRUTH_UNITS = {"eta": "m", "contact_force": "N", "bellow_pressure": "bar", "y_cb": "m",
-               "xi": "m", "x_cb": "m", "robot_displacement": "m", "slider_position": "m"}
+TRUTH_UNITS = {"eta": "m", "contact_force": "N", "bellow_pressure": "bar",
+               "measured_pressure": "bar", "y_cb": "m", "xi": "m", "x_cb": "m",
+               "robot_displacement": "m", "slider_position": "m", "bar_acceleration": "m/s^2",
+               "led": "1"}
 
 
 @dataclass(frozen=True)
@@ -132,6 +134,9 @@ class VirtualTestBed:
         self.valve_voltage = 0.0
         self.led = 0
         self._history: deque[PlantSample] = deque(maxlen=16)
+        self.keep_truth = True
+        """Keep every sample's truth (for :meth:`truth_dataset`, e.g. the camera's view)."""
+        self._truth_log: list[tuple[float, ...]] = []
 
     # --- life cycle ---------------------------------------------------------------------------
 
@@ -149,8 +154,9 @@ class VirtualTestBed:
         self._time = float(start_time)
         outputs = self._fmu.initialise([self._eta[-1], pressure], start_time=start_time)
         self._history.clear()
+        self._truth_log.clear()
         sample = self._sample(outputs, pressure, pressure, bar_acceleration=0.0)
-        self._history.append(sample)
+        self._keep(sample)
         return sample
 
     def close(self) -> None:
@@ -193,8 +199,32 @@ class VirtualTestBed:
         outputs = self._fmu.step([eta, bellow])
         self._time = float(time)
         sample = self._sample(outputs, measured_pressure, bellow, bar_acceleration)
-        self._history.append(sample)
+        self._keep(sample)
         return sample
+
+    def _keep(self, sample: PlantSample) -> None:
+        self._history.append(sample)
+        if self.keep_truth:
+            self._truth_log.append((sample.time, *(sample.truth[n] for n in TRUTH_UNITS)))
+
+    def truth_dataset(self, origin: float = 0.0):
+        """Every sample's hidden quantities as a :class:`rig.dataset.Dataset` (source emulator).
+
+        Times are shifted by `origin` (the clock time of a run's t = 0), so they share the run's
+        time base; samples before the run (the drive's start-up) have negative times.
+
+        The camera's view (markers on pan-head, cross bar and slider; the LED) and the tests of
+        the diagnosis read it; the diagnosis itself never does.
+        """
+        from rig.dataset import Dataset, RunMetadata
+
+        log = np.array(self._truth_log, dtype=float)
+        log = log[np.concatenate([[True], np.diff(log[:, 0]) > 0])]  # one row per instant
+        return Dataset(log[:, 0] - origin, {n: log[:, i + 1] for i, n in enumerate(TRUTH_UNITS)},
+                       dict(TRUTH_UNITS),
+                       RunMetadata(sample_rate=1.0 / self.sample_period, source="emulator",
+                                   notes="virtual test bed truth: never an input to the diagnosis",
+                                   truth=self.truth_record()))
 
     def read_sensors(self, now: float) -> dict[str, float]:
         """The sensor values of :meth:`read` (the :class:`rig.session.RigIO` interface)."""

@@ -5,7 +5,8 @@ driver and run loop of :mod:`rig.session` talk real CAN frames (python-can's ``v
 interface) to :class:`rig.drive_emulator.DriveEmulator`, whose slider drives
 :class:`rig.testbed.VirtualTestBed` (the pantograph FMU and the rig's imperfections). A
 :class:`rig.clock.SimulatedClock` steps the emulator once per cycle, so a run takes as long as
-its computation, not its duration, and is exactly reproducible.
+its computation, not its duration, and is exactly reproducible. The run folder also receives
+``truth.csv``: what really happened (true bar height, contact force, marker positions, LED).
 """
 from __future__ import annotations
 
@@ -26,6 +27,9 @@ from rig.session import RunOptions, RunResult, run_profile
 from rig.testbed import VirtualTestBed
 
 _channels = itertools.count()
+#: File in a virtual run's folder with the plant's hidden quantities at 500 Hz (marker positions,
+#: true contact force, bellow pressure, LED); for the camera renderer and tests, never the diagnosis.
+TRUTH_FILE = "truth.csv"
 
 
 def run_virtual_profile(profile: Profile, *, fmu_path: str | Path, folder: str | Path,
@@ -77,8 +81,15 @@ def run_virtual_profile(profile: Profile, *, fmu_path: str | Path, folder: str |
         truth = {**bed.truth_record(), "drive": _plain(drive_parameters)}
         run_options = replace(options or RunOptions(), source="emulator", truth=truth,
                               background_writer=False)
-        return run_profile(profile, driver=driver, io=bed, clock=clock, folder=folder,
-                           options=run_options, progress=progress)
+        origin = 0.0
+        try:
+            result = run_profile(profile, driver=driver, io=bed, clock=clock, folder=folder,
+                                 options=run_options, progress=progress)
+            origin = result.clock_origin
+            return result
+        finally:  # the truth beside the run, also when it stopped early
+            if Path(folder).is_dir() and not (Path(folder) / TRUTH_FILE).exists():
+                bed.truth_dataset(origin).write(Path(folder) / TRUTH_FILE)
 
 
 def _plain(parameters: DriveParameters) -> dict[str, Any]:

@@ -9,3 +9,18 @@ def project_fmus(tmp_path_factory):
 
     built = build_project_fmus(tmp_path_factory.mktemp("fmus"))
     return {b.path.name: b for b in built}
+
+
+@pytest.fixture(scope="session", autouse=True)
+def fmu_cache(tmp_path_factory):
+    """FMUs built on demand by the commands go to a temporary cache, not the user's home."""
+    import os
+
+    folder = tmp_path_factory.mktemp("fmu_cache")
+    previous = os.environ.get("PANTO_FMU_CACHE")
+    os.environ["PANTO_FMU_CACHE"] = str(folder)
+    yield folder
+    if previous is None:
+        os.environ.pop("PANTO_FMU_CACHE", None)
+    else:
+        os.environ["PANTO_FMU_CACHE"] = previous

@@ -119,3 +119,21 @@ def test_a_run_never_overwrites_an_earlier_one(pantograph_fmu, tmp_path):
         run_virtual_profile(profile, fmu_path=pantograph_fmu, folder=tmp_path / "run",
                             imperfections=RigImperfections.none())
     assert (tmp_path / "run" / "run.csv").read_bytes() == before
+
+
+def test_the_truth_beside_a_virtual_run_shares_its_time_base(pantograph_fmu, tmp_path):
+    """truth.csv: the bar really is where the drive says (no robot mode), on the run's time axis."""
+    profile = _profile([{"kind": "sine", "frequency": 2.0, "amplitude": 0.01}], duration=1.0)
+    result = run_virtual_profile(profile, fmu_path=pantograph_fmu, folder=tmp_path / "run",
+                                 imperfections=RigImperfections.none())
+    assert result.success
+    data = read_dataset(tmp_path / "run")
+    truth = read_dataset(tmp_path / "run" / "truth.csv", required=())
+    assert truth.time[0] < 0.0  # the drive's start-up came first
+    at_run = np.searchsorted(truth.time, data.time - 1e-6)  # same instants, up to round-off
+    np.testing.assert_allclose(truth.time[at_run], data.time, atol=1e-9)
+    # Ideal sensors: the force channel is the true contact force at the same instants ...
+    np.testing.assert_allclose(data["force"], truth["contact_force"][at_run], atol=1e-9)
+    # ... and the drive's reported position (0.1 um units) is the slider's true position.
+    np.testing.assert_allclose(data["motor_position"][2:], truth["slider_position"][at_run][2:],
+                               atol=2e-3)
