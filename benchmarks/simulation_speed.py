@@ -3,7 +3,7 @@ time and memory of ``panto build-fmu``. Run by hand; writes benchmarks/results.j
 
     .venv/bin/python benchmarks/simulation_speed.py [--python-seconds 3]
 
-The rig excitation is 60 s of APRBS on eta and p with outputs at 500 Hz (panto.demo.rig_excitation).
+The rig excitation is 60 s of APRBS on eta and p with outputs at 500 Hz (the shipped rig/profiles/aprbs_training.json, conditioned as the rig does).
 The Python path (SciPy solve_ivp, LSODA with the exact Jacobian, restarted at every 500 Hz sample
 like the FMU's communication steps) is too slow for 60 s, so it runs the first --python-seconds and
 its speed is reported per simulated second.
@@ -37,12 +37,28 @@ def measure_build(out: Path) -> dict:
             "fmus": sorted(p.name for p in out.glob("*.fmu"))}
 
 
+def rig_excitation(duration: float) -> tuple:
+    """The shipped APRBS training profile: conditioned motor command and pressure demand, 500 Hz."""
+    from dataclasses import replace
+    from importlib.resources import files
+
+    import numpy as np
+
+    from rig.profile_preview import conditioned_command
+    from rig.profiles import load_profile, render_profile
+
+    profile = replace(load_profile(files("rig") / "profiles" / "aprbs_training.json"),
+                      duration=duration)
+    rendered = render_profile(profile)
+    stream_time, command = conditioned_command(profile)
+    eta = 2.0 + np.interp(rendered.time, stream_time, command)
+    return rendered.time, {"eta": eta, "p": rendered.pressure_demand}
+
+
 def measure_simulation(fmus: Path, python_seconds: float) -> dict:
     from build_fmu.simulate import FmuSimulator
     from fmu_src.models import Model
     from fmu_src.simulation import simulate_model
-    from panto.demo import rig_excitation
-
     t, inputs = rig_excitation(60.0)
     results = {}
     for interface in ("CS", "ME"):

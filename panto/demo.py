@@ -1,9 +1,11 @@
 """The main job (``panto demo``), as far as the product goes today.
 
 1. Generate, compile, package and validate the FMUs (FMI 2.0 and 3.0, ME and CS).
-2. Excite the nonlinear and the linearised pantograph FMU with a rig-like run (APRBS on the
-   linear motor height eta and on the bellow pressure p, 500 Hz), through fmpy in Co-Simulation.
-3. Write the time series (CSV), a plot (PNG) and a summary (JSON) to the output folder.
+2. Run the thesis' rig campaign on the virtual test bed: an APRBS training run and a ramp
+   validation run, through the CAN driver and the drive emulator, with the rig's imperfections
+   on; the datasets (CSV, Parquet, MAT) go to ``runs/``.
+3. Simulate the nominal nonlinear and linearised FMUs on each run's measured inputs and plot them
+   against the measured force and cross-bar position (the sim-to-real gap before any fitting).
 
 The rig, identification, diagnosis, design-of-experiments and catenary steps of the full story
 (issue 9) join here as those parts land.
@@ -17,47 +19,6 @@ from typing import Callable
 
 import numpy as np
 
-SAMPLE_RATE_HZ = 500.0
-
-
-def generate_aprbs(rng: np.random.Generator, n_samples: int, sample_rate: float, *,
-                   low: float, high: float, min_hold: float, max_hold: float) -> np.ndarray:
-    """Amplitude-modulated pseudo-random binary sequence: random levels held for random times.
-
-    Levels are uniform in [low, high]; hold times uniform in [min_hold, max_hold] seconds.
-    (A placeholder for the rig's signal library, issue 4.)
-    """
-    signal = np.empty(n_samples)
-    k = 0
-    while k < n_samples:
-        hold = int(round(rng.uniform(min_hold, max_hold) * sample_rate))
-        signal[k:k + max(hold, 1)] = rng.uniform(low, high)
-        k += max(hold, 1)
-    return signal
-
-
-def rig_excitation(duration: float, *, seed: int = 1) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """A rig-like run: APRBS on eta (2.0 m +- 25 mm) and p (3.6-4.6 bar), 500 Hz, smoothed.
-
-    The linear-motor height is low-pass filtered (as the rig's reference filter does) so that the
-    commanded position has no jumps; the pressure follows the bellow's first-order lag (~0.3 s).
-    """
-    from scipy.signal import lfilter
-
-    rng = np.random.default_rng(seed)
-    n = int(round(duration * SAMPLE_RATE_HZ)) + 1
-    t = np.arange(n) / SAMPLE_RATE_HZ
-    eta = generate_aprbs(rng, n, SAMPLE_RATE_HZ, low=1.975, high=2.025, min_hold=0.2, max_hold=1.5)
-    p = generate_aprbs(rng, n, SAMPLE_RATE_HZ, low=3.6, high=4.6, min_hold=1.0, max_hold=4.0)
-
-    def first_order(x: np.ndarray, tau: float) -> np.ndarray:
-        a = np.exp(-1.0 / (tau * SAMPLE_RATE_HZ))
-        return lfilter([1 - a], [1, -a], x, zi=[a * x[0]])[0]
-
-    eta = first_order(first_order(eta, 0.03), 0.03)
-    return t, {"eta": eta, "p": first_order(p, 0.3)}
-
-
 def _fit_percent(measured: np.ndarray, simulated: np.ndarray) -> float:
     """Fit % = 100 (1 - ||y - y_hat|| / ||y - mean(y)||) (thesis section 4.1.3)."""
     return float(100 * (1 - np.linalg.norm(measured - simulated)
@@ -67,7 +28,6 @@ def _fit_percent(measured: np.ndarray, simulated: np.ndarray) -> float:
 def run_demo(out: Path, *, quick: bool = False, progress: Callable[[str], None] = print) -> dict:
     """Run the main job and write its results to ``out``; returns the summary."""
     from build_fmu.project import build_project_fmus
-    from build_fmu.simulate import FmuSimulator
     from fmu_src.models import Model
 
     started = time.perf_counter()
@@ -77,60 +37,106 @@ def run_demo(out: Path, *, quick: bool = False, progress: Callable[[str], None] 
     kwargs = {"names": names} if names else {}
     built = build_project_fmus(out / "fmus", progress=lambda s: progress("      " + s), **kwargs)
     invalid = [b.path.name for b in built if b.problems]
+    if invalid:
+        raise RuntimeError(f"fmpy's validator rejected {invalid}")
 
-    duration = 10.0 if quick else 60.0
-    progress(f"[2/3] simulating a {duration:.0f} s rig run (APRBS on eta and p, 500 Hz)")
-    t, inputs = rig_excitation(duration)
-    responses = {}
-    for name in ("Pantograph", "PantographLinear"):
-        clock = time.perf_counter()
-        with FmuSimulator(out / "fmus" / f"{name}.fmu", interface="CS") as simulator:
-            responses[name] = simulator.simulate(t, inputs)
-        progress(f"      {name}.fmu (CS): {time.perf_counter() - clock:.2f} s wall for {duration:.0f} s")
+    progress("[2/3] rig campaign on the virtual test bed (CAN driver + drive emulator, "
+             "imperfections on)")
+    runs = _rig_campaign(out, quick=quick, progress=progress)
 
-    progress("[3/3] writing the time series, the plot and the summary")
-    nonlinear, linear = responses["Pantograph"], responses["PantographLinear"]
-    csv_path = nonlinear.to_csv(out / "pantograph_rig_run.csv")
-    figure = _plot(t, inputs, nonlinear, linear)
-    figure.savefig(out / "pantograph_rig_run.png", dpi=120)
+    progress("[3/3] the nominal model on the measured inputs (first look at the sim-to-real gap)")
+    gap = {}
+    for label, run in runs.items():
+        gap[label] = _nominal_against_measured(out, label, run["folder"], progress)
     model = Model("Pantograph")
     lin = model.linearise(2.0, 4.0)
     summary = {
         "fmus": [{"file": b.path.name, "fmi_version": b.fmi_version, "valid": not b.problems}
                  for b in built],
-        "invalid_fmus": invalid,
-        "rig_run": {"duration_s": duration, "sample_rate_hz": SAMPLE_RATE_HZ, "csv": csv_path.name,
-                    "plot": "pantograph_rig_run.png"},
-        "linear_vs_nonlinear_fit_percent": {
-            name: _fit_percent(nonlinear[name], linear[name]) for name in ("y_cb", "xi", "F_c")},
+        "rig_runs": runs,
+        "nominal_model_fit_percent": gap,
         "check_point_eta2_p4": {"F_c_N": float(lin.y0[2]), "phi1_deg": float(np.degrees(lin.x0[0])),
                                 "modes_hz": lin.natural_frequencies_hz.tolist()},
         "wall_time_s": time.perf_counter() - started,
     }
-    (out / "summary.json").write_text(json.dumps(summary, indent=2))
+    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=str))
     progress(f"done in {summary['wall_time_s']:.1f} s: {out / 'summary.json'}")
-    if invalid:
-        raise RuntimeError(f"fmpy's validator rejected {invalid}")
     return summary
 
 
-def _plot(t, inputs, nonlinear, linear):
+def _rig_campaign(out: Path, *, quick: bool, progress: Callable[[str], None]) -> dict:
+    """The thesis' two runs (APRBS training, ramp validation) on the virtual test bed."""
+    from dataclasses import replace
+    from importlib.resources import files
+
+    from rig.profiles import load_profile
+    from rig.virtual import run_virtual_profile
+
+    runs = {}
+    for label, file, quick_duration in (("training", "aprbs_training.json", 8.0),
+                                        ("validation", "ramps_validation.json", 8.0)):
+        profile = load_profile(files("rig") / "profiles" / file)
+        if quick:
+            profile = replace(profile, duration=quick_duration)
+        folder = out / "runs" / label
+        clock = time.perf_counter()
+        result = run_virtual_profile(profile, fmu_path=out / "fmus" / "Pantograph.fmu",
+                                     folder=folder, seed=1 if label == "training" else 2,
+                                     progress=lambda s: progress("      " + s))
+        seconds = time.perf_counter() - clock
+        progress(f"      {label}: {profile.name}, {profile.duration:g} s in {seconds:.1f} s wall, "
+                 f"{result.status}")
+        if not result.success:
+            raise RuntimeError(f"the {label} run did not complete: {result.status}")
+        runs[label] = {"profile": profile.name, "duration_s": profile.duration,
+                       "folder": str(folder.relative_to(out)), "wall_s": seconds}
+    return runs
+
+
+def _nominal_against_measured(out: Path, label: str, folder: str,
+                              progress: Callable[[str], None]) -> dict:
+    """Simulate the nominal nonlinear and linearised FMUs on a run's measured inputs."""
+    from build_fmu.simulate import FmuSimulator
+    from rig.dataset import read_dataset
+
+    data = read_dataset(out / folder)
+    inputs = {"eta": 2.0 + data["motor_position"], "p": data["pressure"]}
+    measured = {"F_c": data["force"], "y_cb": 0.5 * (data["laser_1"] + data["laser_2"])}
+    responses = {}
+    for name in ("Pantograph", "PantographLinear"):
+        with FmuSimulator(out / "fmus" / f"{name}.fmu", interface="CS") as simulator:
+            responses[name] = simulator.simulate(data.time, inputs,
+                                                 start_values={"eta0": 2.0 + data["motor_position"][0],
+                                                               "p0": data["pressure"][0]}
+                                                 if name == "PantographLinear" else None)
+    fits = {name: {signal: _fit_percent(measured[signal], responses[name][signal])
+                   for signal in measured} for name in responses}
+    figure = _plot(data.time, inputs, measured, responses["Pantograph"],
+                   responses["PantographLinear"], title=f"{label} run (virtual test bed)")
+    figure.savefig(out / f"{label}_run.png", dpi=120)
+    progress(f"      {label}: nominal model fit on force {fits['Pantograph']['F_c']:.1f} %, "
+             f"on cross bar {fits['Pantograph']['y_cb']:.1f} % -> {label}_run.png")
+    return fits
+
+
+def _plot(t, inputs, measured, nonlinear, linear, *, title: str):
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(4, 1, figsize=(11, 9), sharex=True)
-    axes[0].plot(t, inputs["eta"] * 1e3, color="k", lw=0.8)
-    axes[0].set_ylabel("eta [mm]")
+    axes[0].plot(t, (inputs["eta"] - 2.0) * 1e3, color="k", lw=0.8)
+    axes[0].set_ylabel("linear motor [mm]")
     axes[1].plot(t, inputs["p"], color="k", lw=0.8)
-    axes[1].set_ylabel("p [bar]")
+    axes[1].set_ylabel("pressure [bar]")
     for ax, name, scale, unit in ((axes[2], "y_cb", 1e3, "mm"), (axes[3], "F_c", 1.0, "N")):
-        ax.plot(nonlinear.time, nonlinear[name] * scale, lw=0.9, label="nonlinear FMU")
+        ax.plot(t, measured[name] * scale, color="0.55", lw=0.7, label="measured")
+        ax.plot(nonlinear.time, nonlinear[name] * scale, lw=0.9, label="nominal model (FMU)")
         ax.plot(linear.time, linear[name] * scale, lw=0.9, ls="--", label="linearised FMU")
         ax.set_ylabel(f"{name} [{unit}]")
         ax.legend(loc="upper right")
     axes[-1].set_xlabel("time [s]")
-    axes[0].set_title("Pantograph on a rig-like run: nonlinear vs linearised FMU (Co-Simulation)")
+    axes[0].set_title(f"{title}: measured vs the nominal pantograph model")
     fig.tight_layout()
     return fig

@@ -71,7 +71,7 @@ class RunOptions:
     """
 
     source: str = "rig"
-    formats: tuple[str, ...] = ("parquet",)
+    formats: tuple[str, ...] = ("parquet", "mat")
     pressure_controller: PressureControllerOptions = field(default_factory=PressureControllerOptions)
     settle_time: float = 5.0
     settle_tolerance: float = 0.1
