@@ -41,9 +41,10 @@ Examples
 """
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -55,6 +56,10 @@ from .simulate import INTERFACES, FmuSimulator, SimulationError, _check_names
 
 _FATAL = 4
 _OK_OR_WARNING = 1
+#: CVODE's relative tolerance for Model Exchange stepping. Tighter than a whole-run simulation
+#: needs (1e-6): CVODE restarts at every communication point, so its local errors add up over
+#: thousands of restarts; at 1e-8 they stay far below the coupling error.
+DEFAULT_ME_TOLERANCE = 1e-8
 
 
 class _RawFloats:
@@ -143,7 +148,8 @@ class FmuStepper(FmuSimulator):
     parameters : mapping of str to value, optional
         Parameters (and start values) set before every initialisation.
     solver_tolerance : float, optional
-        Relative tolerance: CVODE's for ME (default 1e-6), the experiment tolerance for CS
+        Relative tolerance: CVODE's for ME (default :data:`DEFAULT_ME_TOLERANCE`), the
+        experiment tolerance for CS
         (default: the FMU's default experiment, else none).
     debug_logging : bool, optional
         Switch the FMU's debug logging on (messages land in the collected log).
@@ -184,7 +190,7 @@ class FmuStepper(FmuSimulator):
         if solver_tolerance is None and md.defaultExperiment is not None:
             solver_tolerance = md.defaultExperiment.tolerance
         if solver_tolerance is None and interface == "ME":
-            solver_tolerance = 1e-6
+            solver_tolerance = DEFAULT_ME_TOLERANCE
         self.solver_tolerance = None if solver_tolerance is None else float(solver_tolerance)
         self.calls = 0
         self._states: list[Any] = []
@@ -495,23 +501,13 @@ class FmuStepper(FmuSimulator):
                                status=error.status, time=self._time,
                                messages=self._log.messages)
 
-    def _fmi_errors(self) -> "_FmiErrors":
-        return _FmiErrors(self)
-
-
-class _FmiErrors:
-    """Context manager turning fmpy's FMICallException into a SimulationError with the log."""
-
-    def __init__(self, stepper: FmuStepper) -> None:
-        self._stepper = stepper
-
-    def __enter__(self) -> None:
-        return None
-
-    def __exit__(self, kind: Any, error: Any, traceback: Any) -> bool:
-        if isinstance(error, FMICallException):
-            raise self._stepper._simulation_error(error) from error
-        return False
+    @contextlib.contextmanager
+    def _fmi_errors(self) -> Iterator[None]:
+        """Turn fmpy's FMICallException into a SimulationError carrying the FMU's log."""
+        try:
+            yield
+        except FMICallException as error:
+            raise self._simulation_error(error) from error
 
 
 def _reopen_stepper(fmu_path: str, step_size: float, inputs: Sequence[str],
