@@ -70,6 +70,7 @@ def _rig_campaign(out: Path, *, quick: bool, progress: Callable[[str], None]) ->
     from importlib.resources import files
 
     from rig.profiles import load_profile
+    from rig.recorder import new_run_folder
     from rig.virtual import run_virtual_profile
 
     runs = {}
@@ -78,7 +79,7 @@ def _rig_campaign(out: Path, *, quick: bool, progress: Callable[[str], None]) ->
         profile = load_profile(files("rig") / "profiles" / file)
         if quick:
             profile = replace(profile, duration=quick_duration)
-        folder = out / "runs" / label
+        folder = new_run_folder(out / "runs", prefix=label)  # a rerun never overwrites a run
         clock = time.perf_counter()
         result = run_virtual_profile(profile, fmu_path=out / "fmus" / "Pantograph.fmu",
                                      folder=folder, seed=1 if label == "training" else 2,

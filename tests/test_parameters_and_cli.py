@@ -89,12 +89,14 @@ def test_cli_reports_bad_input_without_a_traceback(tmp_path, capsys):
 
 def test_quick_demo_runs_the_rig_campaign_and_compares_the_nominal_model(tmp_path):
     assert main(["demo", "--quick", "--out", str(tmp_path)]) == 0
+    assert main(["demo", "--quick", "--out", str(tmp_path)]) == 0  # a rerun adds new runs
+    assert (tmp_path / "runs" / "training_0002" / "run.csv").is_file()
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert all(f["valid"] for f in summary["fmus"])
     for label in ("training", "validation"):
         assert (tmp_path / f"{label}_run.png").stat().st_size > 10_000
         for name in ("run.csv", "run.parquet", "run.mat", "truth.csv"):
-            assert (tmp_path / "runs" / label / name).is_file()
+            assert (tmp_path / summary["rig_runs"][label]["folder"] / name).is_file()
         fits = summary["nominal_model_fit_percent"][label]
         # The nominal model explains much of the cross-bar motion but not all: the rig's
         # imperfections (contact loss, friction, bar inertia, bellow lag) are on.
