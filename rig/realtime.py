@@ -72,6 +72,7 @@ from rig.drive import LinearMotorDriver, open_bus
 from rig.drive_emulator import DriveEmulator, DriveParameters
 from rig.imperfections import RigImperfections
 from rig.profiles import Profile, ProfileStream
+from rig.virtual import TRUTH_FILE, plain_drive_parameters
 from rig.session import RunOptions, RunResult, run_profile
 from rig.testbed import PlantSample, VirtualTestBed
 
@@ -356,7 +357,8 @@ def run_virtual_profile_realtime(profile: Profile, *, fmu_path: str | Path, fold
                                            reply_timeout_cycles=settings.reply_timeout_cycles,
                                            position_limits=(profile.limits.motor_min,
                                                             profile.limits.motor_max))
-                truth = {**plant.bed.truth_record(), "drive": _plain(drive_settings),
+                truth = {**plant.bed.truth_record(),
+                         "drive": plain_drive_parameters(drive_settings),
                          "realtime": {"lenient_timing": settings.lenient_timing,
                                       "reply_timeout_cycles": settings.reply_timeout_cycles}}
                 run_options = replace(options or RunOptions(), source="emulator", truth=truth)
@@ -388,18 +390,11 @@ def _warm_up(profile: Profile) -> None:
 
 def _write_truth(bed: VirtualTestBed, folder: str | Path, result: RunResult | None) -> None:
     """``truth.csv`` beside the run (as :func:`rig.virtual.run_virtual_profile` writes it)."""
-    from rig.virtual import TRUTH_FILE
 
     path = Path(folder) / TRUTH_FILE
     origin = result.clock_origin if result is not None else math.nan
     if Path(folder).is_dir() and not path.exists() and math.isfinite(origin):
         bed.truth_dataset(origin).write(path)
-
-
-def _plain(parameters: DriveParameters) -> dict[str, Any]:
-    from dataclasses import asdict
-
-    return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(parameters).items()}
 
 
 @dataclass(frozen=True)

@@ -78,7 +78,7 @@ def run_virtual_profile(profile: Profile, *, fmu_path: str | Path, folder: str |
         driver = LinearMotorDriver(master_bus, clock=clock,
                                    position_limits=(profile.limits.motor_min,
                                                     profile.limits.motor_max))
-        truth = {**bed.truth_record(), "drive": _plain(drive_parameters)}
+        truth = {**bed.truth_record(), "drive": plain_drive_parameters(drive_parameters)}
         run_options = replace(options or RunOptions(), source="emulator", truth=truth,
                               background_writer=False)
         origin = 0.0
@@ -92,7 +92,8 @@ def run_virtual_profile(profile: Profile, *, fmu_path: str | Path, folder: str |
                 bed.truth_dataset(origin).write(Path(folder) / TRUTH_FILE)
 
 
-def _plain(parameters: DriveParameters) -> dict[str, Any]:
+def plain_drive_parameters(parameters: DriveParameters) -> dict[str, Any]:
+    """Drive parameters as plain JSON values (for a run's truth record)."""
     from dataclasses import asdict
 
     return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(parameters).items()}
