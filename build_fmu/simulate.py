@@ -33,7 +33,7 @@ import shutil
 import weakref
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 from fmpy import extract, read_model_description
@@ -493,32 +493,46 @@ class FmuSimulator:
     def _run_me(self, times: np.ndarray, table: PiecewiseLinearInputs,
                 tolerance: float) -> tuple[np.ndarray, int]:
         """CVODE (BDF) over the FMU's derivatives, with state and time events."""
-        fmu, md = self._fmu, self.model_description
         self._table = table
         set_time_and_inputs = self._set_time_and_inputs
         solver = self._cvode_solver(float(times[0]), (times[-1] - times[0]) / 50.0, tolerance)
         outputs = np.empty((times.size, self._outputs.size))
         outputs[0] = self._outputs.get()
-        completed_step = md.modelExchange.needsCompletedIntegratorStep
         events, t = 0, float(times[0])
         for k in range(1, times.size):
-            target = float(times[k])
-            while target - t > 1e-13 * max(1.0, abs(target)):
-                state_event, t = solver.advance(t, min(target, self._next_event))
-                set_time_and_inputs(t)
-                step_event = False
-                if completed_step:
-                    step_event, terminate = fmu.completedIntegratorStep()
-                    if terminate:
-                        raise self._termination(t)
-                if state_event or step_event or t >= self._next_event - 1e-13:
-                    fmu.enterEventMode()
-                    self._next_event = self._update_discrete_states()
-                    fmu.enterContinuousTimeMode()
-                    solver.reset(t)
-                    events += 1
+            t, handled = self._advance_me(solver, t, float(times[k]), set_time_and_inputs)
+            events += handled
             outputs[k] = self._outputs.get()
         return outputs, events
+
+    def _advance_me(self, solver: Any, t: float, end: float, set_time: Callable[[float], None],
+                    before_advance: Callable[[float], None] | None = None) -> tuple[float, int]:
+        """Integrate from `t` to `end` through time, state and step events; return (end, events).
+
+        `set_time(t)` hands the FMU the time (and the inputs at it) after each solver step;
+        `before_advance(target)` runs before each one (e.g. to set CVODE's stop time).
+        """
+        fmu = self._fmu
+        completed_step = self.model_description.modelExchange.needsCompletedIntegratorStep
+        events = 0
+        while end - t > 1e-13 * max(1.0, abs(end)):
+            target = min(end, self._next_event)
+            if before_advance is not None:
+                before_advance(target)
+            state_event, t = solver.advance(t, target)
+            set_time(t)
+            step_event = False
+            if completed_step:
+                step_event, terminate = fmu.completedIntegratorStep()
+                if terminate:
+                    raise self._termination(t)
+            if state_event or step_event or t >= self._next_event - 1e-13:
+                fmu.enterEventMode()
+                self._next_event = self._update_discrete_states()
+                fmu.enterContinuousTimeMode()
+                solver.reset(t)
+                events += 1
+        return t, events
 
     def _set_time_and_inputs(self, t: float) -> None:
         """Time and inputs u(t) of the current run, before each evaluation of the FMU."""

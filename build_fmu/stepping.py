@@ -388,26 +388,12 @@ class FmuStepper(FmuSimulator):
 
     def _integrate(self, h: float) -> None:
         """CVODE from the current time to ``time + h`` with the inputs held (see module notes)."""
-        fmu, solver = self._fmu, self._step_solver
-        t, end = self._time, self._time + h
-        solver.restart(t, h)
-        completed_step = self.model_description.modelExchange.needsCompletedIntegratorStep
-        while end - t > 1e-13 * max(1.0, abs(end)):
-            target = min(end, self._next_event)
-            if self._set_stop_time is not None:
-                self._set_stop_time(solver.cvode_mem, target)
-            state_event, t = solver.advance(t, target)
-            fmu.setTime(t)
-            step_event = False
-            if completed_step:
-                step_event, terminate = fmu.completedIntegratorStep()
-                if terminate:
-                    raise self._termination(t)
-            if state_event or step_event or t >= self._next_event - 1e-13:
-                fmu.enterEventMode()
-                self._next_event = self._update_discrete_states()
-                fmu.enterContinuousTimeMode()
-                solver.reset(t)
+        solver = self._step_solver
+        solver.restart(self._time, h)
+        stop_time = self._set_stop_time
+        self._advance_me(solver, self._time, self._time + h, self._fmu.setTime,
+                         None if stop_time is None
+                         else lambda target: stop_time(solver.cvode_mem, target))
 
     def simulate(self, *args: Any, **kwargs: Any) -> Any:
         """A whole run as :meth:`FmuSimulator.simulate`; the stepping must be initialised anew."""
