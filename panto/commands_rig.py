@@ -55,7 +55,9 @@ def run_rig_run(args: argparse.Namespace) -> int:
 
         profile = replace(profile, duration=args.duration)
     folder = Path(args.folder) if args.folder else new_run_folder(args.out)
-    options = RunOptions(formats=tuple(args.formats), notes=args.notes or "")
+    options = RunOptions(formats=tuple(args.formats), notes=args.notes or "",
+                         rig_setup={} if args.motor_zero_height is None
+                         else {"motor_zero_height": args.motor_zero_height})
     if args.interface:
         result = _run_on_rig(args, profile, folder, options)
     elif args.realtime:
@@ -159,6 +161,9 @@ def register(add: Callable) -> None:
     p.add_argument("--interface", help="python-can interface of a real rig (e.g. socketcan, pcan)")
     p.add_argument("--channel", help="CAN channel of a real rig (e.g. can0)")
     p.add_argument("--node-id", type=int, default=63, help="the drive's CANopen node id")
+    p.add_argument("--motor-zero-height", type=float,
+                   help="height [m] of the bar at slider position 0, recorded in the run's "
+                        "metadata for identification (virtual test bed: its own, 2.0 m)")
     p.add_argument("--io", help="MODULE:FACTORY returning the real rig's analogue I/O")
 
     p = sub.add_parser("emulate", help="serve the emulated drive and plant on a CAN bus")

@@ -361,7 +361,9 @@ def run_virtual_profile_realtime(profile: Profile, *, fmu_path: str | Path, fold
                          "drive": plain_drive_parameters(drive_settings),
                          "realtime": {"lenient_timing": settings.lenient_timing,
                                       "reply_timeout_cycles": settings.reply_timeout_cycles}}
-                run_options = replace(options or RunOptions(), source="emulator", truth=truth)
+                run_options = replace(options or RunOptions(), source="emulator", truth=truth,
+                                      rig_setup={"motor_zero_height": plant.bed.motor_zero_height,
+                                                 **dict((options or RunOptions()).rig_setup)})
                 _warm_up(profile)
                 result = run_profile(profile, driver=driver, io=plant,
                                      clock=clock if clock is not None else RealClock(),

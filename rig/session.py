@@ -68,6 +68,10 @@ class RunOptions:
         What generated the data (the emulator fills it; empty on the rig).
     background_writer : bool
         Write the recorder's buffers from a thread (keeps fsync out of the 2 ms cycle).
+    rig_setup : mapping
+        Known facts of the rig's set-up, recorded in the metadata's ``extra["rig_setup"]``; the
+        identification reads ``motor_zero_height`` [m] (bar height at slider position 0, the
+        model input ``eta = motor_zero_height + motor_position``).
     """
 
     source: str = "rig"
@@ -78,6 +82,7 @@ class RunOptions:
     notes: str = ""
     truth: Mapping[str, Any] = field(default_factory=dict)
     background_writer: bool = True
+    rig_setup: Mapping[str, Any] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -227,7 +232,8 @@ def run_profile(profile: Profile, *, driver: LinearMotorDriver, io: RigIO, clock
     options = options or RunOptions()
     metadata = RunMetadata(sample_rate=profile.sample_rate, source=options.source,
                            seed=profile.seed, profile=profile_to_dict(profile),
-                           notes=options.notes or profile.notes, truth=dict(options.truth))
+                           notes=options.notes or profile.notes, truth=dict(options.truth),
+                           extra={"rig_setup": dict(options.rig_setup)} if options.rig_setup else {})
     recorder = Recorder(folder, channels=RUN_CHANNELS, metadata=metadata,
                         background=options.background_writer)
     loop = _Loop(profile, driver, io, clock, recorder, options)

@@ -80,7 +80,9 @@ def run_virtual_profile(profile: Profile, *, fmu_path: str | Path, folder: str |
                                                     profile.limits.motor_max))
         truth = {**bed.truth_record(), "drive": plain_drive_parameters(drive_parameters)}
         run_options = replace(options or RunOptions(), source="emulator", truth=truth,
-                              background_writer=False)
+                              background_writer=False,
+                              rig_setup={"motor_zero_height": bed.motor_zero_height,
+                                         **dict((options or RunOptions()).rig_setup)})
         origin = 0.0
         try:
             result = run_profile(profile, driver=driver, io=bed, clock=clock, folder=folder,
