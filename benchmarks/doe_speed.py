@@ -1,0 +1,125 @@
+"""Benchmark: design of experiments on this machine (thesis section 5.4 example, issue 7).
+
+Run by hand; writes benchmarks/doe_speed.json and benchmarks/doe_speed.md (and the example's
+plots and summary into docs/doe/).
+
+    .venv/bin/python benchmarks/doe_speed.py [--generations 300] [--online-generations 12]
+
+Measures, for the one-mass oscillator (m, c, k = 1, 2, 20; Ts = 0.1 s; T_end = 30 s; N = 300):
+
+* the full offline design (pymoo GA, population 60, ``--generations`` generations, D-optimal),
+* the online design (RLS + receding horizon of 20 inputs, GA of population 20 and
+  ``--online-generations`` generations per sample): time per step (mean, 95 %, max) against the
+  sample period,
+* one vectorised criterion evaluation of a population of 60 whole inputs (N = 300),
+
+and records the outcome of the example: Cramer-Rao variance ratios sine / design at the true
+parameters, the RLS estimates and P matrices (eqs. 5.26-5.28) and the grey-box m, c, k
+(Table 5.1). Machine load is recorded: other processes on the same cores slow every number.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+from datetime import UTC, datetime
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).parent
+sys.path.insert(0, str(HERE.parent))
+
+from identification.doe_example import run_thesis_example
+from identification.doe_oscillator import (
+    INITIAL_PHYSICAL,
+    NOISE_VARIANCE,
+    TransferFunctionModel,
+    discretise_oscillator,
+    two_sine_input,
+)
+from identification.doe_plots import plot_line_designs, plot_thesis_example
+from identification.fisher import criterion_cost, fisher_information
+from identification.input_design import GeneticOptions
+from identification.online_design import OnlineOptions
+
+
+def time_population_evaluation(repeats: int = 50) -> float:
+    """Seconds for one D-criterion evaluation of 60 candidate inputs of 300 samples."""
+    model = TransferFunctionModel()
+    theta = discretise_oscillator(*INITIAL_PHYSICAL)
+    population = np.tile(two_sine_input(), (60, 1))[..., None]
+    began = time.perf_counter()
+    for _ in range(repeats):
+        _, psi = model.sensitivities(theta, population)
+        criterion_cost(fisher_information(psi, NOISE_VARIANCE), "D")
+    return (time.perf_counter() - began) / repeats
+
+
+def markdown(result: dict) -> str:
+    """The benchmark as a Markdown report."""
+    online, offline, example = result["online"], result["offline"], result["example"]
+    lines = [
+        "# Design of experiments: speed and outcome (thesis section 5.4)", "",
+        f"{result['date']}, {result['machine']}, load average {result['load_average']}", "",
+        "| what | time |", "|---|---|",
+        (f"| criterion of 60 inputs x 300 samples (one GA generation) | "
+         f"{1e3 * result['population_evaluation_s']:.2f} ms |"),
+        f"| full offline design ({offline['message']}) | {offline['wall_time_s']:.1f} s |",
+        f"| online step, horizon 20, mean | {1e3 * online['mean_step_s']:.1f} ms |",
+        f"| online step, 95th percentile | {1e3 * online['p95_step_s']:.1f} ms |",
+        f"| online step, max | {1e3 * online['max_step_s']:.1f} ms |",
+        f"| online steps within the sample period (100 ms) | {100 * online['within_period']:.1f} % |",
+        f"| whole online run (300 samples) | {online['wall_time_s']:.1f} s |", "",
+        "Cramer-Rao variance ratio sine / input at the true parameters (a1, a2, b1, b2):", "",
+        "| input | a1 | a2 | b1 | b2 | grey-box m, c, k | grey-box variances |",
+        "|---|---|---|---|---|---|---|"]
+    for name, values in example["inputs"].items():
+        ratio = " | ".join(f"{r:.1f}" for r in values["variance_ratio_vs_sine"])
+        mck = ", ".join(f"{v:.4f}" for v in values["grey_box_m_c_k"])
+        var = ", ".join(f"{v:.2e}" for v in values["grey_box_variance"])
+        lines.append(f"| {name} | {ratio} | {mck} | {var} |")
+    lines += ["", "RLS estimate and P (from theta_init, P0 = 1e6 I), as eqs. 5.26-5.28:", ""]
+    for name, values in example["inputs"].items():
+        lines.append(f"- {name}: theta = {np.round(values['rls_theta'], 4).tolist()}, "
+                     f"diag P = {np.round(np.diag(values['rls_P']), 2).tolist()}")
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--generations", type=int, default=300)
+    parser.add_argument("--online-generations", type=int, default=12)
+    args = parser.parse_args()
+    evaluation = time_population_evaluation()
+    example = run_thesis_example(
+        offline_options=GeneticOptions(population=60, generations=args.generations),
+        online_options=OnlineOptions(genetic=GeneticOptions(20, args.online_generations)),
+        progress=lambda line: print(line, flush=True))
+    steps = example.online.step_times
+    summary = example.summary()
+    result = {
+        "date": datetime.now(UTC).isoformat(timespec="seconds"),
+        "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+                   f"Python {platform.python_version()}",
+        "load_average": [round(v, 2) for v in os.getloadavg()],
+        "population_evaluation_s": evaluation,
+        "offline": summary["offline"],
+        "online": {**summary["online"], "p95_step_s": float(np.percentile(steps, 95)),
+                   "within_period": float(np.mean(steps < 0.1))},
+        "example": summary,
+    }
+    (HERE / "doe_speed.json").write_text(json.dumps(result, indent=2))
+    (HERE / "doe_speed.md").write_text(markdown(result))
+    docs = HERE.parent / "docs" / "doe"
+    plot_line_designs(docs / "doe_line.png")
+    plot_thesis_example(example, docs)
+    example.write(docs)
+    print(markdown(result))
+
+
+if __name__ == "__main__":
+    main()
