@@ -110,7 +110,9 @@ def _parser() -> tuple[argparse.ArgumentParser, dict[str, Callable]]:
 
 # Subcommands of the later packages live beside this file, one module per package; each module
 # has ``register(add)`` where ``add(name, handler, help) -> ArgumentParser`` declares a subcommand.
-_COMMAND_MODULES = ("panto.commands_cosim", "panto.commands_rig")
+_COMMAND_MODULES = ("panto.commands_cosim", "panto.commands_rig", "panto.commands_sync",
+                    "panto.commands_video", "panto.commands_comparison",
+                    "panto.commands_identification")
 
 
 def main(argv: list[str] | None = None) -> int:
