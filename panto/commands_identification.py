@@ -1,0 +1,135 @@
+"""``panto identify``: fit a model structure to a rig run (issue 6, thesis chapter 4).
+
+``panto identify RUN --model physical-linear [--validate RUN] [--free a b] [--fix k_ph=50000]
+[--method lm|nsga2] [--multistart N] [--workers N] [--out DIR] [--json FILE] [--rate 50]
+[--start S --stop S]`` prints the progress, a table (parameter, value, std, nominal) and the fits,
+and writes the parameter file, the result JSON and the plot into ``--out``.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+from pathlib import Path
+from typing import Callable
+
+
+def _say(line: str) -> None:
+    print(line, flush=True)
+
+
+def _fixed(items: list[str] | None) -> dict[str, float]:
+    fixed = {}
+    for item in items or []:
+        name, sep, value = item.partition("=")
+        try:
+            fixed[name.strip()] = float(value)
+        except ValueError:
+            sep = ""
+        if not sep or not name.strip():
+            raise ValueError(f"--fix {item!r}: expected NAME=VALUE, e.g. k_ph=50000")
+    return fixed
+
+
+def _executor(workers: int):
+    if workers <= 1:
+        return None
+    from concurrent.futures import ProcessPoolExecutor
+
+    return ProcessPoolExecutor(max_workers=workers)
+
+
+def run_identify(args: argparse.Namespace) -> int:
+    """Load the runs, fit, print, write."""
+    from identification.base import identifier
+    from identification.data import pantograph_data
+    from identification.reporting import write_identification
+
+    def load(path: str):
+        return pantograph_data(path, rate=args.rate, eta_offset=args.eta_offset, start=args.start,
+                               stop=args.stop, cross_bar=args.cross_bar)
+
+    data = load(args.dataset)
+    validation = load(args.validate) if args.validate else None
+    options = {"fixed": _fixed(args.fix), "method": args.method}
+    if args.free:
+        options["free"] = args.free
+    if args.method == "lm":
+        options.update(multistart=args.multistart, max_evaluations=args.max_evaluations)
+        if args.multistart:
+            import numpy as np
+
+            options["rng"] = np.random.default_rng(args.seed)
+    _say(f"identify {args.model} on {args.dataset}: {len(data)} samples at "
+         f"{1.0 / data.sample_period:g} Hz")
+    executor = _executor(args.workers)
+    try:
+        result = identifier(args.model).identify(data, executor=executor, progress=_say,
+                                                 **options)
+    finally:
+        if executor is not None:
+            executor.shutdown()
+    _print_result(result, validation)
+    if args.out:
+        nominal = _nominal(args.model)
+        paths = write_identification(result, args.out, data=data, validation=validation,
+                                     nominal=nominal)
+        for path in paths.values():
+            _say(f"wrote {path}")
+    if args.json:
+        from identification.reporting import result_summary
+
+        summary = result_summary(result, data=data, validation=validation)
+        Path(args.json).write_text(json.dumps(summary, indent=2, default=str) + "\n")
+        _say(f"wrote {args.json}")
+    return 0 if result.success else 1
+
+
+def _nominal(model: str) -> dict[str, float] | None:
+    if model in ("physical", "physical-linear"):
+        from identification.physical import PhysicalLinear
+
+        return PhysicalLinear().nominal()
+    return None
+
+
+def _print_result(result, validation) -> None:
+    nominal = _nominal(result.structure) or {}
+    _say(f"{'parameter':>10} {'value':>12} {'std':>10} {'nominal':>12}")
+    for name in result.free:
+        value, std = result.parameters[name], result.std.get(name, math.nan)
+        _say(f"{name:>10} {value:12.5g} {std:10.3g} {nominal.get(name, math.nan):12.5g}")
+    _say("fit on training: " + ", ".join(f"{k} {v:.1f} %" for k, v in result.fit.items()))
+    if validation is not None:
+        fits = result.fit_on(validation, [o for o in result.fit if o in validation.output_names])
+        _say("fit on validation: " + ", ".join(f"{k} {v:.1f} %" for k, v in fits.items()))
+    weak = (result.details.get("identifiability") or {}).get("not_identifiable") or {}
+    for name, why in weak.items():
+        _say(f"not identifiable: {name}: {why}")
+    _say(f"{'' if result.success else 'FAILED: '}{result.message} "
+         f"({result.n_evaluations} evaluations, {result.wall_time:.1f} s)")
+
+
+def register(add: Callable[..., argparse.ArgumentParser]) -> None:
+    """Declare ``panto identify``."""
+    p = add("identify", run_identify, "fit a model structure to a rig run (thesis chapter 4)")
+    p.add_argument("dataset", help="run folder or dataset file (training)")
+    p.add_argument("--model", default="physical-linear",
+                   help="structure: physical, physical-linear, two-mass, ... (default "
+                        "physical-linear)")
+    p.add_argument("--validate", help="run folder or dataset file for validation")
+    p.add_argument("--free", nargs="+", help="parameters to estimate (default: the structure's)")
+    p.add_argument("--fix", nargs="+", metavar="NAME=VALUE", help="parameters held fixed")
+    p.add_argument("--method", default="lm", choices=("lm", "nsga2"))
+    p.add_argument("--multistart", type=int, default=0, help="extra LM runs from random starts")
+    p.add_argument("--seed", type=int, default=None, help="seed of the multistart points")
+    p.add_argument("--max-evaluations", type=int, default=2000)
+    p.add_argument("--workers", type=int, default=1, help="processes for the evaluations")
+    p.add_argument("--out", help="folder for parameters.json, result.json and fit.png")
+    p.add_argument("--json", help="also write the result summary as JSON")
+    p.add_argument("--rate", type=float, default=50.0, help="identification rate [Hz]")
+    p.add_argument("--start", type=float, help="start of the time window [s]")
+    p.add_argument("--stop", type=float, help="end of the time window [s]")
+    p.add_argument("--eta-offset", type=float, help="height of the motor's zero [m] (default "
+                   "from the run's metadata)")
+    p.add_argument("--cross-bar", default="laser", choices=("laser", "video"))
