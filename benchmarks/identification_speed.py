@@ -1,0 +1,147 @@
+"""Benchmark: identify the physical model (13 parameters of Table 4.1) - LM against a thesis-style GA.
+
+Run by hand; writes benchmarks/identification_speed.json and benchmarks/identification_speed.md.
+
+    .venv/bin/python benchmarks/identification_speed.py [--training RUN] [--quick]
+        [--population 200] [--generations 60] [--workers 2]
+
+Data: 60 s of the virtual test bed's training run (APRBS on both inputs, imperfections on) at
+50 Hz (issue 6, "Benchmark"). Both runs fit the linearised physical model ("physical-linear":
+equilibrium and exact linearisation recomputed for every candidate, as the thesis did, section
+4.1.3) to the force and the cross-bar position from Table 4.1 as the start / prior:
+
+1. Levenberg-Marquardt (identification.least_squares.fit_least_squares): wall time and fit.
+2. The thesis' way: NSGA-II (identification.genetic.fit_pareto) with a large population, every
+   generation evaluated on a process pool, stopped as soon as one candidate reaches the LM run's
+   least-squares cost sum_j (1 - fit_j / 100)^2 (the "same fit"), or at the generation limit.
+
+The machine load is recorded: other processes on the same cores slow everything down.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+HERE = Path(__file__).parent
+sys.path.insert(0, str(HERE.parent))
+
+DEFAULT_RUN = "/tmp/demo_full/runs/training_0001"
+
+
+def _data(run: str, seconds: float):
+    from identification.data import pantograph_data
+
+    data = pantograph_data(run, rate=50.0)
+    start = float(data.time[0])
+    return data.segment(start, start + seconds)
+
+
+def _lm(structure, data, free) -> dict:
+    from identification.genetic import polish_cost
+    from identification.least_squares import fit_least_squares
+
+    started = time.perf_counter()
+    result = fit_least_squares(structure, data, free=free)
+    wall = time.perf_counter() - started
+    fits = {o: float(result.fit[o]) for o in ("y_cb", "F_c")}
+    return {"wall_time_s": wall, "fit_percent": fits, "cost": polish_cost(list(fits.values())),
+            "evaluations": result.n_evaluations, "success": result.success,
+            "message": result.message}
+
+
+def _ga(structure, data, free, target: float, population: int, generations: int,
+        workers: int) -> dict:
+    from identification.genetic import fit_pareto, polish_cost
+
+    lines = []
+
+    def say(line: str) -> None:
+        lines.append(line)
+        print("  GA " + line, flush=True)
+
+    started = time.perf_counter()
+    with ProcessPoolExecutor(workers) as pool:
+        pareto = fit_pareto(structure, data, free=free, population=population,
+                            generations=generations, executor=pool, seed=1, progress=say,
+                            stop=lambda record: record["best_cost"] <= target)
+    wall = time.perf_counter() - started
+    last = pareto.history[-1]
+    best = min(range(len(pareto.front)), key=lambda i: polish_cost(pareto.objectives[i]),
+               default=None)
+    return {"wall_time_s": wall, "population": population, "generations_run": len(pareto.history),
+            "generation_limit": generations, "evaluations": pareto.n_evaluations,
+            "reached_lm_fit": last["best_cost"] <= target, "best_cost": last["best_cost"],
+            "best_fit_percent": None if best is None else
+            dict(zip(pareto.objective_names, pareto.objectives[best].tolist())),
+            "front_size": len(pareto.front),
+            "history": [{k: h[k] for k in ("generation", "evaluations", "best_fit", "best_cost",
+                                           "seconds")} for h in pareto.history]}
+
+
+def _markdown(report: dict) -> str:
+    lm, ga = report["lm"], report["ga"]
+    ga_fit = ga["best_fit_percent"] or {}
+    lines = [
+        "# Identification speed: physical model (13 parameters), LM vs thesis-style GA", "",
+        f"Data: {report['data']['source']}, {report['data']['seconds']:.0f} s at 50 Hz "
+        f"({report['data']['samples']} samples). Machine: {report['machine']['cpus']} CPUs, "
+        f"load {report['machine']['load_before']} before the run. Command: "
+        f"`{report['command']}`.", "",
+        "| method | wall time [s] | evaluations | fit F_c [%] | fit y_cb [%] | LS cost | note |",
+        "|---|---|---|---|---|---|---|",
+        f"| Levenberg-Marquardt | {lm['wall_time_s']:.1f} | {lm['evaluations']} | "
+        f"{lm['fit_percent']['F_c']:.1f} | {lm['fit_percent']['y_cb']:.1f} | {lm['cost']:.4f} | "
+        f"{lm['message'][:60]} |",
+        f"| NSGA-II, population {ga['population']}, {report['workers']} processes | "
+        f"{ga['wall_time_s']:.1f} | {ga['evaluations']} | {ga_fit.get('F_c', float('nan')):.1f} "
+        f"| {ga_fit.get('y_cb', float('nan')):.1f} | {ga['best_cost']:.4f} | "
+        + ("reached the LM fit" if ga["reached_lm_fit"] else
+           f"did NOT reach the LM fit in {ga['generations_run']} generations") + " |",
+        "",
+        "The GA's fits are those of its front's best least-squares solution; the LS cost is "
+        "sum_j (1 - fit_j/100)^2 (the GA stops when one candidate reaches the LM cost). The thesis "
+        "took several hours for its GA (population 1000) on an office PC (section 4.8).",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--training", default=DEFAULT_RUN, help="training run folder")
+    parser.add_argument("--seconds", type=float, default=60.0)
+    parser.add_argument("--population", type=int, default=200)
+    parser.add_argument("--generations", type=int, default=60)
+    parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--quick", action="store_true", help="population 40, 5 generations")
+    args = parser.parse_args()
+    if args.quick:
+        args.population, args.generations = 40, 5
+    from identification.physical import TABLE_4_1, PhysicalLinear
+
+    data = _data(args.training, args.seconds)
+    structure = PhysicalLinear(outputs=("y_cb", "F_c"))
+    load = os.getloadavg()[0]
+    print(f"LM on {len(data)} samples ...", flush=True)
+    lm = _lm(structure, data, TABLE_4_1)
+    print(f"  LM {lm['wall_time_s']:.1f} s, fit {lm['fit_percent']}", flush=True)
+    ga = _ga(structure, data, TABLE_4_1, lm["cost"], args.population, args.generations,
+             args.workers)
+    report = {"command": "python benchmarks/identification_speed.py " + " ".join(sys.argv[1:]),
+              "data": {"source": str(args.training), "seconds": args.seconds,
+                       "samples": len(data)},
+              "machine": {"cpus": os.cpu_count(), "load_before": round(load, 2),
+                          "python": platform.python_version()},
+              "workers": args.workers, "lm": lm, "ga": ga}
+    (HERE / "identification_speed.json").write_text(json.dumps(report, indent=2) + "\n")
+    (HERE / "identification_speed.md").write_text(_markdown(report))
+    print(_markdown(report))
+
+
+if __name__ == "__main__":
+    main()
