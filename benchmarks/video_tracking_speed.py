@@ -4,17 +4,20 @@ Run by hand; writes benchmarks/video_tracking_speed.json and benchmarks/video_tr
 
     .venv/bin/python benchmarks/video_tracking_speed.py [--duration 6] [--presets superfast,...]
 
-A clip of the synthetic camera (1920 x 1080, 50 frames/s, H.264 4:4:4, crf 18) is rendered from
-known marker paths, then read back in several ways; frames per second are given against the wall
-clock and against this process's CPU time (the machine is shared: CPU time is what the work
-costs, wall time what it took among the other processes):
+A clip of the synthetic camera (1920 x 1080, 50 frames/s, H.264 4:4:4, crf 18, a keyframe every
+second) is rendered from known marker paths, then read back in several ways; frames per second
+(the fastest of ``--repeat`` runs) are given against the wall clock and against CPU time (this
+process plus its worker processes; the machine is shared: CPU time is what the work costs, wall
+time what it took among the other processes):
 
-``decode``: decoding alone (no pixel conversion); ``decode + full RGB``: every frame converted
-to RGB (what a tracker working on whole frames pays first); ``track``: :func:`track_video`, which
-converts only the regions it looks at (four marker windows and the LED region). Goal: tracking at
-least 4 x the camera's 50 frames/s. Each case is run with FFmpeg's decoder threads and without.
-The x264 preset of the encoding changes the decoding cost (``ultrafast`` has no CABAC and no
-deblocking filter), so clips of several presets can be compared.
+``decode``: decoding alone (no pixel conversion), with FFmpeg's decoder threads off and with
+its three thread types; ``decode + full RGB``: every frame converted to RGB (what a tracker
+working on whole frames pays first); ``track``: :func:`track_video`, which converts only the
+regions it looks at (four marker windows and the LED region), serially in this process
+(``workers=1``) and on keyframe-aligned segments in two worker processes (``workers=2``).
+Goal: tracking at least 4 x the camera's 50 frames/s. The x264 preset of the encoding changes
+the decoding cost (``ultrafast`` has no CABAC and no deblocking filter), so clips of several
+presets are compared.
 """
 from __future__ import annotations
 
@@ -22,6 +25,7 @@ import argparse
 import json
 import os
 import platform
+import resource
 import sys
 import tempfile
 import time
@@ -57,28 +61,61 @@ def _truth(seconds: float) -> Dataset:
                    RunMetadata(sample_rate=500.0, source="emulator"))
 
 
+def _cpu_seconds() -> float:
+    """CPU time of this process and of its finished children (the worker processes)."""
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + children.ru_utime + children.ru_stime
+
+
+def _machine_busy_seconds() -> float:
+    """CPU time all processes of the machine have used since boot (from /proc/stat)."""
+    fields_ = [int(v) for v in Path("/proc/stat").read_text().split("\n")[0].split()[1:]]
+    user, nice, system, _, _, irq, softirq, steal = fields_[:8]
+    return (user + nice + system + irq + softirq + steal) / os.sysconf("SC_CLK_TCK")
+
+
 def _measure(work) -> dict:
-    wall, cpu = time.perf_counter(), time.process_time()
+    load = os.getloadavg()[0]
+    busy = _machine_busy_seconds()
+    wall, cpu = time.perf_counter(), _cpu_seconds()
     frames = work()
-    wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+    wall, cpu = time.perf_counter() - wall, _cpu_seconds() - cpu
+    others = max(_machine_busy_seconds() - busy - cpu, 0.0) / wall
     return {"frames": frames, "wall_s": wall, "cpu_s": cpu, "fps_wall": frames / wall,
-            "fps_cpu": frames / cpu}
+            "fps_cpu": frames / cpu, "load_before": load, "other_work_cores": others}
 
 
-def _cases(path: Path, setup, threads: bool) -> dict:
-    def decode():
-        return sum(1 for _ in _decoded(path, threads=threads))
+DECODER_THREADS = {"off": False, "SLICE": "SLICE", "FRAME": "FRAME", "AUTO": "AUTO"}
+
+
+def _best(work, repeat: int) -> dict:
+    """The run with the highest wall-clock rate of `repeat` (the least disturbed by other work)."""
+    runs = [_measure(work) for _ in range(repeat)]
+    best = max(runs, key=lambda run: run["fps_wall"])
+    return best | {"runs": len(runs), "fps_wall_all": [run["fps_wall"] for run in runs]}
+
+
+def _cases(path: Path, setup, repeat: int) -> dict:
+    def decode(threads):
+        return lambda: sum(1 for _ in _decoded(path, threads=threads))
 
     def full_rgb():
-        return sum(1 for view in read_frame_views(path, threads=threads) if view.rgb() is not None)
+        return sum(1 for view in read_frame_views(path) if view.rgb() is not None)
 
-    def track():
-        result = track_video(path, setup, threads=threads)
-        assert all(v == 0 for v in result.lost_frames.values()), result.lost_frames
-        return int(result.frame.size)
+    def track(workers, threads=False):
+        def run():
+            result = track_video(path, setup, workers=workers, threads=threads)
+            assert all(v == 0 for v in result.lost_frames.values()), result.lost_frames
+            return int(result.frame.size)
+        return run
 
-    return {"decode": _measure(decode), "decode + full RGB": _measure(full_rgb),
-            "track": _measure(track)}
+    cases = {f"decode, threads {name}": _best(decode(value), repeat)
+             for name, value in DECODER_THREADS.items()}
+    cases["decode + full RGB"] = _best(full_rgb, repeat)
+    cases["track, serial"] = _best(track(1), repeat)
+    cases["track, serial, FRAME threads"] = _best(track(1, "FRAME"), repeat)
+    cases["track, 2 processes"] = _best(track(2), repeat)
+    return cases
 
 
 def main() -> None:
@@ -86,12 +123,14 @@ def main() -> None:
     parser.add_argument("--duration", type=float, default=6.0, help="clip length [s]")
     parser.add_argument("--presets", default="superfast,ultrafast",
                         help="x264 presets of the clips (comma separated)")
+    parser.add_argument("--repeat", type=int, default=3,
+                        help="runs per case; the fastest (least disturbed) is kept")
     args = parser.parse_args()
     results = {"date": datetime.now(timezone.utc).isoformat(timespec="seconds"),
                "machine": f"{platform.platform()}, {os.cpu_count()} CPUs, "
                           f"Python {platform.python_version()}",
-               "clip": f"1920x1080, 50 fps, H.264 yuv444p crf 18, {args.duration:g} s, "
-                       "no shadow", "presets": {}}
+               "clip": f"1920x1080, 50 fps, H.264 yuv444p crf 18, keyframe every 1 s, "
+                       f"{args.duration:g} s, no shadow", "presets": {}}
     camera = CameraSetup(shadow=None)
     with tempfile.TemporaryDirectory() as folder:
         for preset in args.presets.split(","):
@@ -99,9 +138,8 @@ def main() -> None:
             render_run(_truth(args.duration + 1), path, setup=camera, rng=1,
                        duration=args.duration, start_sample=0, preset=preset)
             setup = setup_from_camera(camera)
-            entry = {"size_MB": path.stat().st_size / 1e6, "load_before": os.getloadavg()[0]}
-            for threads in (False, True):
-                entry["threads" if threads else "no threads"] = _cases(path, setup, threads)
+            entry = {"size_MB": path.stat().st_size / 1e6, "load_before": os.getloadavg()[0],
+                     "cases": _cases(path, setup, args.repeat), "load_after": os.getloadavg()[0]}
             results["presets"][preset] = entry
             print(preset, json.dumps(entry, indent=1), flush=True)
     (HERE / "video_tracking_speed.json").write_text(json.dumps(results, indent=2))
@@ -109,37 +147,49 @@ def main() -> None:
 
 
 def _write_markdown(results: dict) -> None:
+    presets = results["presets"]
+    names = list(next(iter(presets.values()))["cases"])
     lines = ["# Video tracking throughput (decode + track, 1080p H.264)", "",
-             f"Date: {results['date']}. Machine: {results['machine']} (shared with other work: "
-             "load average before each clip below). Clip: " + results["clip"] + ".", "",
-             "Frames per second against the wall clock and against the process's CPU time. Goal: "
-             "tracking >= 200 frames/s (4 x the camera's 50).", "",
-             "| encoding preset | decoder threads | decode | decode + full RGB | track (4 markers "
-             "+ LED) | load |", "|---|---|---|---|---|---|"]
-    for preset, entry in results["presets"].items():
-        for threads in ("no threads", "threads"):
-            cases = entry[threads]
-            cells = [f"{cases[c]['fps_wall']:.0f} wall / {cases[c]['fps_cpu']:.0f} CPU"
-                     for c in ("decode", "decode + full RGB", "track")]
-            lines.append(f"| {preset} | {threads} | " + " | ".join(cells)
-                         + f" | {entry['load_before']:.1f} |")
+             f"Date: {results['date']}. Machine: {results['machine']}, shared with other work "
+             "(the 1-minute load average before each case is in the JSON; before/after each "
+             "clip below). Clip: " + results["clip"] + ".", "",
+             "Frames per second against the wall clock and against CPU time (this process and "
+             "its worker processes), the fastest of several runs; in brackets the cores other "
+             "work kept busy during that run (from /proc/stat). Goal: tracking >= 200 "
+             "frames/s (4 x the camera's 50).", "",
+             "| case | " + " | ".join(presets) + " |", "|---|" + "---|" * len(presets)]
+    for name in names:
+        cells = [f"{e['cases'][name]['fps_wall']:.0f} wall / {e['cases'][name]['fps_cpu']:.0f} CPU"
+                 f" ({e['cases'][name]['other_work_cores']:.1f})" for e in presets.values()]
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    lines.append("| load average before / after | " + " | ".join(
+        f"{e['load_before']:.1f} / {e['load_after']:.1f}" for e in presets.values()) + " |")
     lines += ["", "## Reading", ""]
-    for preset, entry in results["presets"].items():
-        cases = entry["no threads"]
-        decode, track = (1e3 / cases[c]["fps_cpu"] for c in ("decode", "track"))
+    for preset, entry in presets.items():
+        cases = entry["cases"]
+        decode = 1e3 / cases["decode, threads off"]["fps_cpu"]
+        track = 1e3 / cases["track, serial"]["fps_cpu"]
         full = 1e3 / cases["decode + full RGB"]["fps_cpu"] - decode
-        met = "meets" if cases["track"]["fps_wall"] >= 200 else "misses"
+        parallel = cases["track, 2 processes"]
+        met = "meets" if parallel["fps_wall"] >= 200 else "misses"
         lines.append(f"- {preset}: decoding {decode:.1f} ms of CPU per frame, tracking four "
                      f"markers and the LED {track - decode:.1f} ms on top (converting the whole "
-                     f"frame to RGB alone would cost {full:.1f} ms); {met} the 200 frames/s goal "
-                     f"({cases['track']['fps_wall']:.0f} wall, {cases['track']['fps_cpu']:.0f} "
-                     "CPU).")
-    lines += ["- Tracking works on the marker windows only (about 120 x 120 px each, converted "
-              "from YUV to RGB there); with a CABAC stream (superfast) the decoder (FFmpeg's "
-              "H.264, a sensor-noisy 4:4:4 stream of about 30 Mbit/s) sets the limit, with "
-              "ultrafast the two cost about the same. "
-              "The numbers are one run on a shared 2-core machine; decoder threads do not help "
-              "while the other core is busy."]
+                     f"frame to RGB alone would cost {full:.1f} ms). Two processes: "
+                     f"{parallel['fps_wall']:.0f} frames/s wall, {parallel['fps_cpu']:.0f} per "
+                     f"CPU-second, so at most {2 * parallel['fps_cpu']:.0f} frames/s with both "
+                     f"cores free; {met} the 200 frames/s goal on this run.")
+    lines += ["- What sets the limit: with a CABAC stream (superfast, the synthetic camera's "
+              "default) FFmpeg's H.264 decoder, about 14 ms of CPU per frame of this "
+              "sensor-noisy 4:4:4 "
+              "stream (~30 Mbit/s), so even two free cores stay near 2 x 64 frames/s; tracking "
+              "(marker windows converted from YUV element by element, opening and labelling on "
+              "the blob's bounding box) costs under 2 ms. FFmpeg's decoder threads give no gain "
+              "per CPU-second (frame threads cost ~10 % more CPU on ultrafast) and cannot decode "
+              "only some planes, so the parallelism is across processes, on segments cut at "
+              "keyframes (a keyframe every second). Two processes need a free second core: with "
+              "one core kept busy by other work (the bracketed figures) they share one core "
+              "and lose ~10 % to switching; the 'with both cores free' figures are 2 x the CPU "
+              "rate."]
     (HERE / "video_tracking_speed.md").write_text("\n".join(lines) + "\n")
 
 

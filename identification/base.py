@@ -24,7 +24,9 @@ import numpy as np
 
 #: Modules whose import registers identifiers (``register_identifier``).
 _IDENTIFIER_MODULES = ("identification.physical", "identification.oscillators",
-                       "identification.blackbox")
+                       "identification.blackbox", "identification.collector_head",
+                       "identification.output_error",
+                       "identification.rigid_body")
 
 
 class IdentificationError(ValueError):

@@ -112,7 +112,8 @@ def _parser() -> tuple[argparse.ArgumentParser, dict[str, Callable]]:
 # has ``register(add)`` where ``add(name, handler, help) -> ArgumentParser`` declares a subcommand.
 _COMMAND_MODULES = ("panto.commands_cosim", "panto.commands_rig", "panto.commands_sync",
                     "panto.commands_video", "panto.commands_comparison",
-                    "panto.commands_identification")
+                    "panto.commands_identification", "panto.commands_doe",
+                    "panto.commands_diagnosis")
 
 
 def main(argv: list[str] | None = None) -> int:

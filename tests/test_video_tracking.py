@@ -266,3 +266,83 @@ def test_cli_renders_sets_up_and_tracks(tmp_path, capsys):
     assert main(["video", "track", str(tmp_path / "truth.csv"), "--setup",
                  str(tmp_path / "setup.json"), "--out", str(tmp_path / "t2.csv")]) == 2
     assert "truth.csv" in capsys.readouterr().err
+
+
+@pytest.fixture(scope="module")
+def short_gops(lossless, tmp_path_factory):
+    """The lossless clip re-encoded as H.264 4:4:4 (B-frames) with a keyframe every 10 frames."""
+    from video_sync.video_io import VideoWriter, read_frames
+
+    _, result, _ = lossless
+    path = tmp_path_factory.mktemp("gops") / "short-gops.mp4"
+    camera = result.camera_json
+    frames = list(read_frames(result.path))
+    height, width = frames[0].rgb.shape[:2]
+    with VideoWriter(path, width, height, 50.0, codec="h264", keyframe_interval=0.2) as writer:
+        for frame in frames:
+            writer.write(frame.rgb)
+    return path, setup_from_camera(camera), result
+
+
+def test_writer_places_keyframes_at_the_interval(lossless, short_gops):
+    from video_sync.video_io import split_at_keyframes, video_info
+
+    path, _, result = short_gops
+    segments = split_at_keyframes(path, 1000)  # more parts than groups: one segment per group
+    assert [s.start_index for s in segments] == list(range(0, result.frame_count, 10))
+    assert sum(s.frame_count for s in segments) == result.frame_count
+    assert video_info(path).frame_count == result.frame_count
+    # the camera's default: a keyframe every second (50 frames)
+    starts = [s.start_index for s in split_at_keyframes(lossless[1].path, 1000)]
+    assert starts == list(range(0, lossless[1].frame_count, 50))
+    halves = split_at_keyframes(path, 2)  # cut at the keyframe nearest half way
+    middle = min(range(0, result.frame_count, 10), key=lambda k: abs(k - result.frame_count / 2))
+    assert [s.start_index for s in halves] == [0, middle]
+    assert [s.frame_count for s in halves] == [middle, result.frame_count - middle]
+
+
+def test_a_segment_decodes_the_same_pixels_as_the_whole_file(short_gops):
+    from video_sync.video_io import read_frame_views, split_at_keyframes
+
+    path, _, _ = short_gops
+    whole = [(v.index, v.time, v.crop(0, 0, 64, 48)) for v in read_frame_views(path)]
+    for segment in split_at_keyframes(path, 4)[1:]:
+        part = [(v.index, v.time, v.crop(0, 0, 64, 48))
+                for v in read_frame_views(path, segment=segment)]
+        assert [p[0] for p in part] == list(range(segment.start_index,
+                                                  segment.start_index + segment.frame_count))
+        for (index, time, pixels), (index_, time_, pixels_) in zip(part, whole[part[0][0]:]):
+            assert (index, time) == (index_, time_)
+            np.testing.assert_array_equal(pixels, pixels_)
+
+
+def _assert_same_tracks(parallel, serial):
+    np.testing.assert_array_equal(parallel.frame, serial.frame)
+    np.testing.assert_array_equal(parallel.time, serial.time)
+    for name, track in serial.markers.items():
+        np.testing.assert_array_equal(parallel.markers[name].valid, track.valid)
+        np.testing.assert_allclose(parallel.markers[name].x_px, track.x_px, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(parallel.markers[name].y_px, track.y_px, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(parallel.led, serial.led)
+    np.testing.assert_array_equal(parallel.led_level, serial.led_level)
+
+
+def test_parallel_segments_track_exactly_as_one_serial_pass(short_gops):
+    from concurrent.futures import ThreadPoolExecutor
+
+    path, setup, result = short_gops
+    serial = track_video(path, setup, workers=1)
+    # the shadow (frames 30 .. 41) covers segment starts 30 and 40: a segment may start lost
+    assert serial.lost_frames["cross_bar"] == np.count_nonzero(~result.visible["cross_bar"]) > 0
+    for name in serial.markers:
+        assert _pixel_errors(result, serial, name).mean() < 0.5, name
+    lines = []
+    parallel = track_video(path, setup, workers=2, progress=lines.append)  # local process pool
+    segments = -(-result.frame_count // 10)  # one per group of pictures (at most 4 per worker)
+    assert len(lines) == min(segments, 8)
+    assert lines[-1].startswith(f"tracked {result.frame_count}/{result.frame_count} frames")
+    _assert_same_tracks(parallel, serial)
+    with ThreadPoolExecutor(2) as executor:  # any executor will do
+        _assert_same_tracks(track_video(path, setup, workers=3, executor=executor), serial)
+    with pytest.raises(ValueError, match="workers = 0"):
+        track_video(path, setup, workers=0)

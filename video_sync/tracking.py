@@ -34,26 +34,35 @@ threshold is the two-cluster (isodata) threshold of all frames' levels unless th
 it. Quality: per frame ``q_k = min(1, |e_k - e_thr| / ((m_1 - m_0)/2))``; overall
 ``Q = clip(1 - 3 (sigma_0 + sigma_1) / (m_1 - m_0), 0, 1)`` (1: point clusters; 0: their 3-sigma
 bands touch), where ``m_i, sigma_i`` are the clusters' means and spreads.
+
+Speed: :func:`track_video` cuts the video at keyframes into segments and tracks them in parallel
+processes. A segment's first frame finds each marker by the whole-region search that also follows
+a loss, and a marker's window holds its blob and the centroid's ring whatever the window's size,
+so the positions equal those of one serial pass. Each window is converted from YUV and compared
+with the reference colour element by element in float32 (:meth:`FrameView.crop_channels`), so a
+pixel's distance does not depend on the window it is cut with.
 """
 from __future__ import annotations
 
-import json
 import math
-from dataclasses import asdict, dataclass, fields
+import os
+from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Callable
 
 import numpy as np
 from scipy import ndimage
 
-from video_sync.video_io import FrameView, read_frame_views
+from video_sync.track_file import (SETUP_FORMAT, TRACK_FORMAT, LedSetup, MarkerSetup, MarkerTrack,
+                                   SetupError, TrackerSetup, TrackResult)
+from video_sync.video_io import FrameView, Segment, read_frame_views, split_at_keyframes
 
-TRACK_FORMAT = "panto-video-track"
-SETUP_FORMAT = "panto-video-setup"
-
-
-class SetupError(ValueError):
-    """A tracker set-up (file) is incomplete or wrong; names the file and the field."""
+__all__ = ["SETUP_FORMAT", "TRACK_FORMAT", "Detection", "LedSetup", "MarkerSetup", "MarkerTrack",
+           "MarkerTracker", "SetupError", "TrackResult", "TrackerSetup", "classify_led",
+           "colour_distance", "detect_marker", "disk_footprint", "isodata_threshold",
+           "read_led_level", "similarity", "squared_distance", "SegmentTrack", "track_segment",
+           "track_video"]
 
 
 def disk_footprint(radius: int = 2) -> np.ndarray:
@@ -78,146 +87,6 @@ def disk_footprint(radius: int = 2) -> np.ndarray:
     return offsets[:, None] ** 2 + offsets[None, :] ** 2 <= radius ** 2
 
 
-def _tuple(value: Any, length: int, name: str, where: str) -> tuple:
-    try:
-        result = tuple(float(v) for v in value)
-    except (TypeError, ValueError):
-        result = ()
-    if len(result) != length:
-        raise SetupError(f"{where}: field {name!r} must be {length} numbers, got {value!r}")
-    return result
-
-
-@dataclass(frozen=True)
-class MarkerSetup:
-    """How to find one marker.
-
-    Attributes
-    ----------
-    name : str
-    roi : tuple of int
-        Region ``(x0, y0, x1, y1)`` [px, end exclusive] the marker must stay inside.
-    colour : tuple of float
-        Reference colour RGB (0..255), the mean of a patch inside the marker.
-    threshold : float
-        Similarity threshold in [0, 1]: a pixel belongs to the marker if ``s > threshold``.
-    mm_per_px : tuple of float
-        Scale (horizontal, vertical) [mm/px] in the marker's plane.
-    offset : tuple of float
-        Absolute position (x, y) [m] of pixel (0, 0) in the marker's plane (y up).
-    radius_px : float
-        Expected disc radius [px] (area check).
-    max_step_px : float
-        Largest plausible distance from the prediction to the next frame's position [px].
-    """
-
-    name: str
-    roi: tuple[int, int, int, int]
-    colour: tuple[float, float, float]
-    threshold: float
-    mm_per_px: tuple[float, float]
-    offset: tuple[float, float]
-    radius_px: float = 10.0
-    max_step_px: float = 40.0
-
-    def to_metres(self, x_px: np.ndarray, y_px: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Absolute position [m]: ``x = x_0 + 1e-3 s_x c``, ``y = y_0 - 1e-3 s_y r``."""
-        return (self.offset[0] + 1e-3 * self.mm_per_px[0] * np.asarray(x_px, float),
-                self.offset[1] - 1e-3 * self.mm_per_px[1] * np.asarray(y_px, float))
-
-    @classmethod
-    def from_dict(cls, data: Mapping[str, Any], where: str) -> "MarkerSetup":
-        _require(data, [f.name for f in fields(cls) if f.name not in ("radius_px", "max_step_px")],
-                 where)
-        marker = cls(str(data["name"]), tuple(int(v) for v in _tuple(data["roi"], 4, "roi", where)),
-                     _tuple(data["colour"], 3, "colour", where), float(data["threshold"]),
-                     _tuple(data["mm_per_px"], 2, "mm_per_px", where),
-                     _tuple(data["offset"], 2, "offset", where),
-                     float(data.get("radius_px", 10.0)), float(data.get("max_step_px", 40.0)))
-        x0, y0, x1, y1 = marker.roi
-        if x1 <= x0 or y1 <= y0:
-            raise SetupError(f"{where}: field 'roi' {list(marker.roi)} is empty")
-        if not 0.0 < marker.threshold < 1.0:
-            raise SetupError(f"{where}: field 'threshold' {marker.threshold} not in (0, 1)")
-        return marker
-
-
-@dataclass(frozen=True)
-class LedSetup:
-    """The LED's region ``(x0, y0, x1, y1)`` [px] and an optional fixed level threshold."""
-
-    region: tuple[int, int, int, int]
-    threshold: float | None = None
-
-    @classmethod
-    def from_dict(cls, data: Mapping[str, Any], where: str) -> "LedSetup":
-        _require(data, ["region"], where)
-        threshold = data.get("threshold")
-        return cls(tuple(int(v) for v in _tuple(data["region"], 4, "region", where)),
-                   None if threshold is None else float(threshold))
-
-
-def _require(data: Any, names: list[str], where: str) -> None:
-    if not isinstance(data, Mapping):
-        raise SetupError(f"{where}: expected an object, got {type(data).__name__}")
-    missing = [n for n in names if n not in data]
-    if missing:
-        raise SetupError(f"{where}: field(s) {missing} missing")
-
-
-@dataclass(frozen=True)
-class TrackerSetup:
-    """Markers to track, the LED to read, and the opening's disk radius [px]."""
-
-    markers: tuple[MarkerSetup, ...]
-    led: LedSetup | None = None
-    opening_radius: int = 2
-
-    def __post_init__(self) -> None:
-        names = [m.name for m in self.markers]
-        if len(set(names)) != len(names):
-            raise SetupError(f"tracker set-up: duplicated marker names {names}")
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"format": SETUP_FORMAT, "version": 1, **asdict(self)}
-
-    @classmethod
-    def from_dict(cls, data: Mapping[str, Any], *, where: str = "tracker set-up"
-                  ) -> "TrackerSetup":
-        """Rebuild from :meth:`to_dict`; a missing or malformed field raises :class:`SetupError`."""
-        _require(data, ["markers"], where)
-        if not isinstance(data["markers"], list) or not data["markers"]:
-            raise SetupError(f"{where}: field 'markers' must be a non-empty list")
-        markers = tuple(MarkerSetup.from_dict(m, f"{where}: markers[{i}]")
-                        for i, m in enumerate(data["markers"]))
-        led = data.get("led")
-        return cls(markers, None if led is None else LedSetup.from_dict(led, f"{where}: led"),
-                   int(data.get("opening_radius", 2)))
-
-    def save(self, path: str | Path) -> Path:
-        """Write as JSON."""
-        path = Path(path)
-        path.write_text(json.dumps(self.to_dict(), indent=2))
-        return path
-
-    @classmethod
-    def load(cls, path: str | Path) -> "TrackerSetup":
-        """Read a JSON set-up file; errors name the file and the field."""
-        path = Path(path)
-        try:
-            data = json.loads(path.read_text())
-        except OSError as error:
-            raise SetupError(f"{path}: cannot read the set-up file ({error})") from None
-        except json.JSONDecodeError as error:
-            raise SetupError(f"{path}: not valid JSON ({error})") from None
-        return cls.from_dict(data, where=str(path))
-
-    def marker(self, name: str) -> MarkerSetup:
-        for marker in self.markers:
-            if marker.name == name:
-                return marker
-        raise KeyError(f"no marker {name!r} in the set-up")
-
 _EIGHT = np.ones((3, 3), dtype=bool)
 _AREA_RANGE = (0.35, 2.0)
 _ASPECT_RANGE = (0.5, 2.0)
@@ -231,8 +100,21 @@ def similarity(rgb: np.ndarray, colour: tuple[float, float, float]) -> np.ndarra
 
 def colour_distance(rgb: np.ndarray, colour: tuple[float, float, float]) -> np.ndarray:
     """Euclidean RGB distance ``||c - c_ref||`` of every pixel (float32, 0 .. 441.7)."""
-    difference = np.asarray(rgb, dtype=np.float32) - np.asarray(colour, dtype=np.float32)
-    return np.sqrt(np.einsum("...k,...k->...", difference, difference))
+    rgb = np.asarray(rgb, dtype=np.float32)
+    return np.sqrt(squared_distance(tuple(rgb[..., k] for k in range(3)), colour))
+
+
+def squared_distance(channels: tuple[np.ndarray, np.ndarray, np.ndarray],
+                     colour: tuple[float, float, float]) -> np.ndarray:
+    """``||c - c_ref||^2`` from the R, G, B planes (float32, element by element)."""
+    red, green, blue = (np.subtract(plane, np.float32(level), dtype=np.float32)
+                        for plane, level in zip(channels, colour))
+    red *= red
+    green *= green
+    blue *= blue
+    red += green
+    red += blue
+    return red
 
 
 def isodata_threshold(values: np.ndarray, *, iterations: int = 100) -> float:
@@ -290,35 +172,43 @@ def detect_marker(rgb: np.ndarray, origin: tuple[int, int], marker: MarkerSetup,
     touches_region : tuple of bool
         Whether the window's left, top, right, bottom edges are the region's edges (a blob
         touching them is leaving the region: lost).
+    """
+    rgb = np.asarray(rgb, dtype=np.float32)
+    squared = squared_distance(tuple(rgb[..., k] for k in range(3)), marker.colour)
+    return _detect(squared, origin, marker, footprint, prediction, touches_region)
 
-    Notes
-    -----
+
+def _detect(squared: np.ndarray, origin: tuple[int, int], marker: MarkerSetup,
+            footprint: np.ndarray, prediction: tuple[float, float] | None,
+            touches_region: tuple[bool, bool, bool, bool]) -> Detection:
+    """:func:`detect_marker` on the squared colour distances of the window.
+
     The opening and labelling run on the bounding box of the thresholded pixels (plus a margin
     of the footprint's radius), which gives the same result as on the whole window and is much
     cheaper when the window holds little more than the marker.
     """
-    distance = colour_distance(rgb, marker.colour)
     limit = (1.0 - marker.threshold) * 255.0 * math.sqrt(3.0)
-    mask = distance < limit
-    rows, columns = np.flatnonzero(mask.any(axis=1)), np.flatnonzero(mask.any(axis=0))
+    mask = squared < np.float32(limit * limit)
+    rows = np.flatnonzero(mask.any(axis=1))
     if rows.size == 0:
         return _lost("no blob")
+    columns = np.flatnonzero(mask.any(axis=0))
     pad = footprint.shape[0] // 2 + 1
     r0, c0 = max(rows[0] - pad, 0), max(columns[0] - pad, 0)
     r1, c1 = min(rows[-1] + pad + 1, mask.shape[0]), min(columns[-1] + pad + 1, mask.shape[1])
-    opened = np.zeros_like(mask)
-    opened[r0:r1, c0:c1] = ndimage.binary_opening(mask[r0:r1, c0:c1], structure=footprint)
-    labels, count = ndimage.label(opened[r0:r1, c0:c1], structure=_EIGHT)
+    opened = ndimage.binary_opening(mask[r0:r1, c0:c1], structure=footprint)
+    labels, count = ndimage.label(opened, structure=_EIGHT)
     if count == 0:
         return _lost("no blob")
-    full_labels = np.zeros(mask.shape, dtype=labels.dtype)
-    full_labels[r0:r1, c0:c1] = labels
-    number, region, area = _choose_blob(full_labels, origin, marker, prediction)
-    expected = math.pi * marker.radius_px ** 2
-    problem = _shape_problem(region, area, expected, mask.shape, touches_region)
+    number, (rows_, columns_), area = _choose_blob(labels, (origin[0] + c0, origin[1] + r0),
+                                                   marker, prediction)
+    region = (slice(rows_.start + r0, rows_.stop + r0), slice(columns_.start + c0,
+                                                              columns_.stop + c0))
+    problem = _shape_problem(region, area, math.pi * marker.radius_px ** 2, mask.shape,
+                             touches_region)
     if problem:
         return _lost(problem)
-    x, y = _weighted_centroid(distance, full_labels == number, region)
+    x, y = _weighted_centroid(squared, labels[rows_, columns_] == number, region)
     x, y = x + origin[0], y + origin[1]
     if prediction is not None and math.hypot(x - prediction[0], y - prediction[1]) \
             > marker.max_step_px:
@@ -363,33 +253,46 @@ def _shape_problem(region: tuple[slice, slice], area: int, expected: float,
     return ""
 
 
-def _weighted_centroid(distance: np.ndarray, blob: np.ndarray, region: tuple[slice, slice]
+def _weighted_centroid(squared: np.ndarray, blob: np.ndarray, region: tuple[slice, slice]
                        ) -> tuple[float, float]:
     """Coverage-weighted centroid (x, y) in window pixels (see the module notes, step 5).
 
-    The weights are taken within 2 px of the blob's equivalent disc (radius ``sqrt(area/pi)``
-    about its area centroid); the background level on the ring 3 .. 5 px outside it.
+    `blob` marks the chosen component inside `region` (its bounding box in the window). The
+    weights are taken within 2 px of the blob's equivalent disc (radius ``sqrt(area/pi)`` about
+    its area centroid); the background level on the ring 3 .. 5 px outside it. Everything is
+    computed on the box ``region`` + 6 px (clipped to the window).
     """
     rows, columns = region
     pad = 6
     r0, c0 = max(rows.start - pad, 0), max(columns.start - pad, 0)
-    r1, c1 = min(rows.stop + pad, blob.shape[0]), min(columns.stop + pad, blob.shape[1])
-    blob, distance = blob[r0:r1, c0:c1], distance[r0:r1, c0:c1]
-    yy, xx = np.nonzero(blob)
+    r1, c1 = min(rows.stop + pad, squared.shape[0]), min(columns.stop + pad, squared.shape[1])
+    distance = np.sqrt(squared[r0:r1, c0:c1])
+    inside = np.zeros(distance.shape, dtype=bool)
+    inside[rows.start - r0:rows.stop - r0, columns.start - c0:columns.stop - c0] = blob
+    yy, xx = np.nonzero(inside)
     radius = math.sqrt(yy.size / math.pi)
-    grid_y, grid_x = np.ogrid[0:blob.shape[0], 0:blob.shape[1]]
-    radial = np.hypot(grid_x - xx.mean(), grid_y - yy.mean())
+    radial = np.hypot(np.arange(distance.shape[1]) - float(xx.sum()) / xx.size,
+                      (np.arange(distance.shape[0]) - float(yy.sum()) / yy.size)[:, None])
     near = radial <= radius + 2.0
     ring = (radial >= radius + 3.0) & (radial <= radius + 5.0)
-    d_fg = float(np.median(distance[blob]))
-    d_bg = float(np.median(distance[ring])) if ring.any() else float(distance[~near].max())
+    d_fg = _median(distance[inside])
+    d_bg = _median(distance[ring]) if ring.any() else float(distance[~near].max())
     if d_bg - d_fg <= 1e-6:
-        weights = blob.astype(np.float32)
+        weights = inside.astype(np.float32)
     else:
         weights = np.clip((d_bg - distance) / (d_bg - d_fg), 0.0, 1.0) * near
     total = float(weights.sum())
-    return (float((weights.sum(axis=0) * np.arange(blob.shape[1])).sum() / total + c0),
-            float((weights.sum(axis=1) * np.arange(blob.shape[0])).sum() / total + r0))
+    return (float((weights.sum(axis=0) * np.arange(distance.shape[1])).sum() / total + c0),
+            float((weights.sum(axis=1) * np.arange(distance.shape[0])).sum() / total + r0))
+
+
+def _median(values: np.ndarray) -> float:
+    """The median of a non-empty 1-D array (mean of the two middle values for an even count)."""
+    half = values.size // 2
+    if values.size % 2:
+        return float(np.partition(values, half)[half])
+    low, high = np.partition(values, [half - 1, half])[half - 1:half + 1]
+    return 0.5 * (float(low) + float(high))
 
 
 class MarkerTracker:
@@ -422,8 +325,8 @@ class MarkerTracker:
         x0, y0, x1, y1 = window
         roi = self.marker.roi
         touches = (x0 == roi[0], y0 == roi[1], x1 == roi[2], y1 == roi[3])
-        detection = detect_marker(view.crop_float(x0, y0, x1, y1), (x0, y0), self.marker,
-                                  self.footprint, prediction, touches_region=touches)
+        squared = squared_distance(view.crop_channels(x0, y0, x1, y1), self.marker.colour)
+        detection = _detect(squared, (x0, y0), self.marker, self.footprint, prediction, touches)
         if detection.valid:
             self._history = (self._history + [(detection.x_px, detection.y_px)])[-2:]
             if self._lost:
@@ -436,9 +339,9 @@ class MarkerTracker:
 
 def read_led_level(view: FrameView, region: tuple[int, int, int, int]) -> float:
     """Relative red excess ``mean(R - (G+B)/2) / mean((G+B)/2)`` of the LED's region."""
-    rgb = view.crop(*region).astype(np.float32)
-    green_blue = 0.5 * (rgb[..., 1] + rgb[..., 2])
-    return float((rgb[..., 0] - green_blue).mean() / max(float(green_blue.mean()), 1.0))
+    red, green, blue = view.crop_channels(*region)
+    green_blue = 0.5 * (green + blue)
+    return float((red - green_blue).mean() / max(float(green_blue.mean()), 1.0))
 
 
 def classify_led(levels: np.ndarray, threshold: float | None = None
@@ -458,19 +361,29 @@ def classify_led(levels: np.ndarray, threshold: float | None = None
     return bits, quality, threshold, overall
 
 
-def track_video(path: str | Path, setup: TrackerSetup, *, threads: bool = True,
+def track_video(path: str | Path, setup: TrackerSetup, *, workers: int | None = None,
+                executor: Executor | None = None, threads: bool | str = False,
                 progress: Callable[[str], None] | None = None) -> TrackResult:
     """Track every marker of `setup` and read the LED in every frame of a video (streaming).
+
+    The video is cut at keyframes into segments (:func:`video_sync.video_io.split_at_keyframes`,
+    about four per worker, so a busy core does not hold up the rest), the segments are tracked in
+    parallel and joined in order. The result equals a serial pass (see the module notes).
 
     Parameters
     ----------
     path : str or pathlib.Path
         Video file.
     setup : TrackerSetup
-    threads : bool
-        Let FFmpeg decode with its own threads.
+    workers : int, optional
+        Processes of the local pool; default: the CPUs this process may run on. 1 (and no
+        `executor`): one serial pass in this process.
+    executor : concurrent.futures.Executor, optional
+        Runs the segments instead of a local process pool (e.g. a Dask client's executor).
+    threads : bool or str
+        FFmpeg's decoder threads (see :func:`video_sync.video_io.read_frame_views`).
     progress : callable, optional
-        Receives a line every 500 frames.
+        Receives a line every 500 frames (serial) or per finished segment (parallel).
 
     Returns
     -------
@@ -482,164 +395,102 @@ def track_video(path: str | Path, setup: TrackerSetup, *, threads: bool = True,
     VideoError
         Missing, unreadable or corrupt video.
     """
+    path = Path(path)
+    workers = _usable_cpus() if workers is None else int(workers)
+    if workers < 1:
+        raise ValueError(f"workers = {workers}: need at least 1")
+    segments = (split_at_keyframes(path, _SEGMENTS_PER_WORKER * workers)
+                if workers > 1 or executor is not None else [])
+    if len(segments) <= 1:
+        parts = [track_segment(path, setup, None, threads, progress)]
+    else:
+        parts = _track_in_parallel(path, setup, segments, workers, executor, threads, progress)
+    return _assemble(path, setup, parts)
+
+
+_SEGMENTS_PER_WORKER = 4
+
+
+def _usable_cpus() -> int:
+    """The CPUs this process may run on (all of them where the system cannot say)."""
+    if hasattr(os, "sched_getaffinity"):
+        return len(os.sched_getaffinity(0))
+    return os.cpu_count() or 1
+
+
+@dataclass(frozen=True)
+class SegmentTrack:
+    """Raw per-frame results of one segment: frame, time, ``(x_px, y_px, valid)`` per marker."""
+
+    frame: np.ndarray
+    time: np.ndarray
+    positions: dict[str, np.ndarray]
+    levels: np.ndarray
+
+
+def track_segment(path: str | Path, setup: TrackerSetup, segment: Segment | None = None,
+                  threads: bool | str = False, progress: Callable[[str], None] | None = None
+                  ) -> SegmentTrack:
+    """Track the frames of one segment of a video (None: the whole file), trackers fresh."""
     footprint = disk_footprint(setup.opening_radius)
     trackers = [MarkerTracker(m, footprint) for m in setup.markers]
-    frames, times, levels = [], [], []
-    detections: dict[str, list[tuple[float, float, bool]]] = {m.name: [] for m in setup.markers}
-    for view in read_frame_views(path, threads=threads):
+    frames, times, levels, rows = [], [], [], []
+    for view in read_frame_views(path, threads=threads, segment=segment):
         frames.append(view.index)
         times.append(view.time)
         for tracker in trackers:
             found = tracker.step(view)
-            detections[tracker.marker.name].append((found.x_px, found.y_px, found.valid))
+            rows.append((found.x_px, found.y_px, found.valid))
         if setup.led is not None:
             levels.append(read_led_level(view, setup.led.region))
         if progress and (view.index + 1) % 500 == 0:
             progress(f"tracked {view.index + 1} frames")
+    table = np.array(rows, dtype=float).reshape(len(frames), len(trackers), 3)
+    return SegmentTrack(np.array(frames, int), np.array(times, float),
+                        {m.name: table[:, k] for k, m in enumerate(setup.markers)},
+                        np.array(levels, float))
+
+
+def _track_in_parallel(path: Path, setup: TrackerSetup, segments: list[Segment], workers: int,
+                       executor: Executor | None, threads: bool | str,
+                       progress: Callable[[str], None] | None) -> list[SegmentTrack]:
+    pool = executor or ProcessPoolExecutor(max_workers=min(workers, len(segments)))
+    try:
+        futures = {pool.submit(track_segment, path, setup, segment, threads): segment
+                   for segment in segments}
+        done, total = 0, sum(s.frame_count for s in segments)
+        for future in as_completed(futures):
+            future.result()
+            done += futures[future].frame_count
+            if progress:
+                progress(f"tracked {done}/{total} frames ({len(segments)} segments)")
+        return [future.result() for future in futures]
+    finally:
+        if executor is None:
+            pool.shutdown(cancel_futures=True)
+
+
+def _assemble(path: Path, setup: TrackerSetup, parts: list[SegmentTrack]) -> TrackResult:
+    """Join the segments' rows (in file order) into a :class:`TrackResult`."""
+    frames = np.concatenate([p.frame for p in parts])
+    times = np.concatenate([p.time for p in parts])
     tracks = {}
     for marker in setup.markers:
-        table = np.array(detections[marker.name], dtype=float).reshape(-1, 3)
+        table = np.concatenate([p.positions[marker.name] for p in parts])
         tracks[marker.name] = MarkerTrack.from_pixels(table[:, 0], table[:, 1],
                                                       table[:, 2].astype(bool), marker)
-    bits, quality, threshold, overall = classify_led(
-        np.array(levels), None if setup.led is None else setup.led.threshold)
     if setup.led is None:
-        bits, quality = np.zeros(len(frames), int), np.zeros(len(frames))
-    return TrackResult(Path(path), _fps(times), setup, np.array(frames, int), np.array(times),
-                       tracks, bits, quality, np.array(levels) if levels else np.full(len(frames),
-                                                                                       np.nan),
+        levels, bits, quality = np.full(frames.size, np.nan), np.zeros(frames.size, int), \
+            np.zeros(frames.size)
+        threshold, overall = math.nan, 0.0
+    else:
+        levels = np.concatenate([p.levels for p in parts])
+        bits, quality, threshold, overall = classify_led(levels, setup.led.threshold)
+    return TrackResult(path, _fps(times), setup, frames, times, tracks, bits, quality, levels,
                        threshold, overall)
 
 
-def _fps(times: list[float]) -> float:
+def _fps(times: np.ndarray) -> float:
     if len(times) < 2:
         return 50.0
     return float(round(1.0 / float(np.median(np.diff(times))), 6))
-
-
-@dataclass(frozen=True)
-class MarkerTrack:
-    """One marker's per-frame positions: pixels, metres (NaN where lost) and validity."""
-
-    x_px: np.ndarray
-    y_px: np.ndarray
-    x: np.ndarray
-    y: np.ndarray
-    valid: np.ndarray
-
-    @classmethod
-    def from_pixels(cls, x_px: np.ndarray, y_px: np.ndarray, valid: np.ndarray,
-                    marker: MarkerSetup) -> "MarkerTrack":
-        x_px = np.where(valid, x_px, np.nan)
-        y_px = np.where(valid, y_px, np.nan)
-        x, y = marker.to_metres(x_px, y_px)
-        return cls(x_px, y_px, x, y, np.asarray(valid, bool))
-
-    @property
-    def lost_frames(self) -> int:
-        return int(np.count_nonzero(~self.valid))
-
-
-@dataclass(frozen=True)
-class TrackResult:
-    """What :func:`track_video` found, frame by frame.
-
-    Attributes
-    ----------
-    video : pathlib.Path
-    fps : float
-    setup : TrackerSetup
-    frame : numpy.ndarray of int
-    time : numpy.ndarray
-        Frame times [s] on the camera's clock.
-    markers : dict of str to MarkerTrack
-    led : numpy.ndarray of int
-        LED bit per frame.
-    led_quality : numpy.ndarray
-        Per-frame confidence of the bit in [0, 1].
-    led_level : numpy.ndarray
-        Relative red excess of the LED region per frame.
-    led_threshold : float
-    led_separation : float
-        Overall LED quality in [0, 1] (separation of the on/off clusters).
-    """
-
-    video: Path
-    fps: float
-    setup: TrackerSetup
-    frame: np.ndarray
-    time: np.ndarray
-    markers: dict[str, MarkerTrack]
-    led: np.ndarray
-    led_quality: np.ndarray
-    led_level: np.ndarray
-    led_threshold: float
-    led_separation: float
-
-    @property
-    def lost_frames(self) -> dict[str, int]:
-        """Frames in which each marker was not found."""
-        return {name: track.lost_frames for name, track in self.markers.items()}
-
-    def columns(self) -> dict[str, np.ndarray]:
-        """The track file's columns, in order."""
-        columns: dict[str, np.ndarray] = {"frame": self.frame, "time": self.time}
-        for name, track in self.markers.items():
-            columns.update({f"{name}_x_px": track.x_px, f"{name}_y_px": track.y_px,
-                            f"{name}_x": track.x, f"{name}_y": track.y,
-                            f"{name}_valid": track.valid.astype(int)})
-        columns.update({"led": self.led, "led_quality": self.led_quality})
-        return columns
-
-    def to_csv(self, path: str | Path) -> Path:
-        """Write the track file and its side file ``<path>.json`` (format panto-video-track)."""
-        path = Path(path)
-        columns = self.columns()
-        integer = {"frame", "led"} | {f"{m}_valid" for m in self.markers}
-        lines = [",".join(columns)]
-        for row in range(self.frame.size):
-            lines.append(",".join(str(int(values[row])) if name in integer
-                                  else repr(float(values[row]))
-                                  for name, values in columns.items()))
-        path.write_text("\n".join(lines) + "\n")
-        side = {"format": TRACK_FORMAT, "version": 1, "video": str(self.video), "fps": self.fps,
-                "markers": list(self.markers), "setup": self.setup.to_dict(),
-                "lost_frames": self.lost_frames, "frame_count": int(self.frame.size),
-                "led_threshold": self.led_threshold, "led_separation": self.led_separation}
-        path.with_name(path.name + ".json").write_text(json.dumps(side, indent=2))
-        return path
-
-    @classmethod
-    def from_csv(cls, path: str | Path) -> "TrackResult":
-        """Read a track file written by :meth:`to_csv` (and its side file)."""
-        import pandas as pd
-
-        path = Path(path)
-        side_path = path.with_name(path.name + ".json")
-        try:
-            side = json.loads(side_path.read_text())
-            table = pd.read_csv(path)
-        except (OSError, json.JSONDecodeError, pd.errors.ParserError) as error:
-            raise SetupError(f"{path}: cannot read the track file ({error})") from None
-        if side.get("format") != TRACK_FORMAT:
-            raise SetupError(f"{side_path}: not a {TRACK_FORMAT!r} side file")
-        setup = TrackerSetup.from_dict(side.get("setup", {}), where=f"{side_path}: setup")
-        missing = [c for c in cls._expected_columns(side["markers"]) if c not in table]
-        if missing:
-            raise SetupError(f"{path}: column(s) {missing} missing")
-        markers = {}
-        for name in side["markers"]:
-            markers[name] = MarkerTrack(*(table[f"{name}_{c}"].to_numpy(float)
-                                          for c in ("x_px", "y_px", "x", "y")),
-                                        table[f"{name}_valid"].to_numpy(int).astype(bool))
-        return cls(Path(side["video"]), float(side["fps"]), setup, table["frame"].to_numpy(int),
-                   table["time"].to_numpy(float), markers, table["led"].to_numpy(int),
-                   table["led_quality"].to_numpy(float), np.full(len(table), np.nan),
-                   float(side.get("led_threshold", math.nan)),
-                   float(side.get("led_separation", math.nan)))
-
-    @staticmethod
-    def _expected_columns(names: list[str]) -> list[str]:
-        return ["frame", "time", *(f"{m}_{c}" for m in names
-                                   for c in ("x_px", "y_px", "x", "y", "valid")),
-                "led", "led_quality"]

@@ -125,18 +125,106 @@ def video_info(path: str | Path) -> VideoInfo:
         container.close()
 
 
-def _decoded(path: str | Path, *, threads: bool = True) -> Iterator[Any]:
-    """The decoded av.VideoFrame objects of a file, one by one; errors name the file."""
+@dataclass(frozen=True)
+class Segment:
+    """A run of frames that starts at a keyframe and decodes on its own.
+
+    Attributes
+    ----------
+    start_index : int
+        Position of its first frame in the file.
+    frame_count : int
+    start_pts : int
+        Presentation time stamp of its first frame, a keyframe (stream time base).
+    stop_pts : int or None
+        Time stamp of the next segment's first frame; None: to the end of the file.
+    """
+
+    start_index: int
+    frame_count: int
+    start_pts: int
+    stop_pts: int | None
+
+
+def split_at_keyframes(path: str | Path, parts: int) -> list[Segment]:
+    """Cut a video at keyframes into about `parts` segments of similar length.
+
+    Reads the packets' time stamps and keyframe flags (no decoding). Frame ``k`` of the file is
+    the packet with the ``k``-th smallest presentation time stamp. A segment begins at a keyframe
+    (an IDR frame: x264 closes its groups of pictures, so nothing before it is needed); the cuts
+    are the keyframes nearest to ``i n / parts`` (``n`` frames, ``i = 1 .. parts - 1``).
+
+    Returns
+    -------
+    list of Segment
+        In file order, covering every frame; empty when the file has packets without time stamps
+        (then it cannot be cut: read it from the start).
+    """
+    import av
+
+    container = _open(path)
+    stamps, keys = [], []
+    try:
+        stream = container.streams.video[0]
+        for packet in container.demux(stream):
+            if packet.size == 0:  # the demuxer's final empty packet
+                continue
+            if packet.pts is None:
+                return []
+            stamps.append(int(packet.pts))
+            if packet.is_keyframe:
+                keys.append(int(packet.pts))
+    except av.FFmpegError as error:
+        raise VideoError(f"{path}: corrupt video data ({error})") from None
+    finally:
+        container.close()
+    order = np.sort(np.array(stamps, dtype=np.int64))
+    starts = np.searchsorted(order, np.unique(keys)) if keys else np.zeros(0, int)
+    if order.size == 0 or starts.size == 0 or starts[0] != 0:
+        return []
+    targets = np.arange(1, max(int(parts), 1)) * order.size / max(int(parts), 1)
+    cuts = np.unique(starts[np.abs(starts[None, :] - targets[:, None]).argmin(axis=1)]) \
+        if targets.size else np.zeros(0, int)
+    bounds = [0, *(int(c) for c in cuts if c > 0), int(order.size)]
+    return [Segment(a, b - a, int(order[a]), int(order[b]) if b < order.size else None)
+            for a, b in zip(bounds[:-1], bounds[1:])]
+
+
+def _use_threads(stream: Any, threads: bool | str) -> None:
+    """FFmpeg's decoder threads: False: one thread; True: "AUTO"; or a thread type."""
+    if threads is False or threads is None:
+        stream.codec_context.thread_count = 1
+    else:
+        stream.thread_type = "AUTO" if threads is True else str(threads)
+        stream.codec_context.thread_count = 0
+
+
+def _decoded(path: str | Path, *, threads: bool | str = False,
+             segment: Segment | None = None) -> Iterator[Any]:
+    """The decoded av.VideoFrame objects of a file (or of a segment), one by one.
+
+    Errors name the file; a segment that does not hold the frames the container lists (a lost
+    frame, a seek that missed its keyframe) raises :class:`VideoError`.
+    """
     import av
 
     container = _open(path)
     stream = container.streams.video[0]
-    if threads:
-        stream.thread_type = "AUTO"
+    _use_threads(stream, threads)
     index = 0
     try:
         try:
+            if segment is not None and segment.start_index > 0:
+                container.seek(segment.start_pts, stream=stream, backward=True, any_frame=False)
             for frame in container.decode(stream):
+                if segment is not None:
+                    if frame.pts < segment.start_pts:
+                        continue
+                    if segment.stop_pts is not None and frame.pts >= segment.stop_pts:
+                        break
+                    if index == 0 and frame.pts != segment.start_pts:
+                        raise VideoError(f"{path}: seeking to frame {segment.start_index} (pts "
+                                         f"{segment.start_pts}) landed at pts {frame.pts}")
                 yield frame
                 index += 1
         except av.FFmpegError as error:
@@ -145,6 +233,10 @@ def _decoded(path: str | Path, *, threads: bool = True) -> Iterator[Any]:
         container.close()
     if index == 0:
         raise VideoError(f"{path}: no decodable frame (corrupt or empty video)")
+    if segment is not None and index != segment.frame_count:
+        raise VideoError(f"{path}: frames {segment.start_index} .. "
+                         f"{segment.start_index + segment.frame_count - 1}: decoded {index}, the "
+                         f"container lists {segment.frame_count}")
 
 
 def _frame_time(frame: Any, index: int, fallback_rate: float) -> float:
@@ -196,13 +288,23 @@ class FrameView:
             self._full = self._frame.to_ndarray(format="rgb24")
         return self._full
 
-    def crop_float(self, x0: int, y0: int, x1: int, y1: int) -> np.ndarray:
-        """As :meth:`crop`, in float32; from YUV without rounding or clipping (faster)."""
+    def crop_channels(self, x0: int, y0: int, x1: int, y1: int
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The R, G, B planes (float32) of a region; from YUV without rounding or clipping.
+
+        Computed element by element (the BT.601 matrix of the module notes, in float32), so a
+        pixel gets the same value whatever region it is cut with.
+        """
         x0, x1 = max(int(x0), 0), min(int(x1), self.width)
         y0, y1 = max(int(y0), 0), min(int(y1), self.height)
         if self._full is None and self.format in ("yuv444p", "yuvj444p") and x1 > x0 and y1 > y0:
-            return self._crop_yuv(x0, y0, x1, y1, rounded=False)
-        return self.crop(x0, y0, x1, y1).astype(np.float32)
+            return self._convert_yuv(x0, y0, x1, y1)
+        rgb = self.crop(x0, y0, x1, y1)
+        return tuple(rgb[..., k].astype(np.float32) for k in range(3))
+
+    def crop_float(self, x0: int, y0: int, x1: int, y1: int) -> np.ndarray:
+        """As :meth:`crop`, in float32; from YUV without rounding or clipping."""
+        return np.stack(self.crop_channels(x0, y0, x1, y1), axis=-1)
 
     def crop(self, x0: int, y0: int, x1: int, y1: int) -> np.ndarray:
         """RGB uint8 of the columns x0..x1-1 and rows y0..y1-1 (clipped to the frame)."""
@@ -212,7 +314,9 @@ class FrameView:
             return np.zeros((max(y1 - y0, 0), max(x1 - x0, 0), 3), dtype=np.uint8)
         if self._full is None:
             if self.format in ("yuv444p", "yuvj444p"):
-                return self._crop_yuv(x0, y0, x1, y1)
+                rgb = np.stack(self._convert_yuv(x0, y0, x1, y1), axis=-1)
+                rgb += 0.5
+                return np.clip(rgb, 0, 255, out=rgb).astype(np.uint8)
             if self.format == "gbrp":
                 g, b, r = (self._plane(i)[y0:y1, x0:x1] for i in range(3))
                 return np.stack([r, g, b], axis=-1)
@@ -223,24 +327,44 @@ class FrameView:
                 return packed[:, :, order].copy()
         return self.rgb()[y0:y1, x0:x1]
 
-    def _crop_yuv(self, x0: int, y0: int, x1: int, y1: int, *, rounded: bool = True
-                  ) -> np.ndarray:
-        yuv = np.empty((y1 - y0, x1 - x0, 3), dtype=np.float32)
-        for number in range(3):
-            yuv[..., number] = self._plane(number)[y0:y1, x0:x1]
+    def _convert_yuv(self, x0: int, y0: int, x1: int, y1: int
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         full_range = self.format == "yuvj444p"
-        yuv -= _YUVJ_OFFSET if full_range else _YUV_OFFSET
-        rgb = yuv @ (_YUVJ_TO_RGB if full_range else _YUV_TO_RGB).T
-        if not rounded:
-            return rgb
-        rgb += 0.5
-        return np.clip(rgb, 0, 255, out=rgb).astype(np.uint8)
+        matrix = _YUVJ_TO_RGB if full_range else _YUV_TO_RGB
+        offset = _YUVJ_OFFSET if full_range else _YUV_OFFSET
+        luma, u, v = (self._plane(k)[y0:y1, x0:x1].astype(np.float32) for k in range(3))
+        luma -= offset[0]
+        luma *= matrix[0, 0]
+        u -= offset[1]
+        v -= offset[2]
+        red = v * matrix[0, 2]
+        red += luma
+        green = u * matrix[1, 1]
+        green += luma
+        green += v * matrix[1, 2]
+        blue = u * matrix[2, 1]
+        blue += luma
+        return red, green, blue
 
 
-def read_frame_views(path: str | Path, *, threads: bool = True) -> Iterator[FrameView]:
-    """Stream :class:`FrameView` objects (regions converted to RGB on demand)."""
+def read_frame_views(path: str | Path, *, threads: bool | str = False,
+                     segment: Segment | None = None) -> Iterator[FrameView]:
+    """Stream :class:`FrameView` objects (regions converted to RGB on demand).
+
+    Parameters
+    ----------
+    path : str or pathlib.Path
+    threads : bool or str
+        FFmpeg's decoder threads: False (default) one thread, True ``"AUTO"``, or a thread type
+        (``"SLICE"``, ``"FRAME"``). Measured on 1080p x264 clips (``benchmarks/
+        video_tracking_speed.md``): frame threads cost about 10 % more CPU per frame and help
+        the wall clock only on an idle machine; several processes on segments scale better.
+    segment : Segment, optional
+        Read only this part (see :func:`split_at_keyframes`); indices stay those of the file.
+    """
     rate = 0.0
-    for index, frame in enumerate(_decoded(path, threads=threads)):
+    first = 0 if segment is None else segment.start_index
+    for index, frame in enumerate(_decoded(path, threads=threads, segment=segment), start=first):
         if frame.pts is None and not rate:
             rate = video_info(path).fps or 50.0
         yield FrameView(frame, index, _frame_time(frame, index, rate))
@@ -263,6 +387,11 @@ class VideoWriter:
     preset : str, optional
         libx264 speed preset; default ``"superfast"`` for H.264 and ``"ultrafast"`` for lossless
         (without CABAC: a noisy lossless frame decodes several times faster).
+    keyframe_interval : float
+        Largest time between two keyframes (IDR frames) [s]; default 1 s (50 frames at 50
+        frames/s, libx264's own default is 250). Every keyframe starts a group of pictures that
+        decodes on its own, so a reader can split the file there and decode the parts in parallel
+        (:func:`video_sync.tracking.track_video`); the cost is a slightly larger file.
 
     Examples
     --------
@@ -271,7 +400,8 @@ class VideoWriter:
     """
 
     def __init__(self, path: str | Path, width: int, height: int, fps: float = 50.0, *,
-                 codec: str = "h264", crf: float = 18.0, preset: str | None = None) -> None:
+                 codec: str = "h264", crf: float = 18.0, preset: str | None = None,
+                 keyframe_interval: float = 1.0) -> None:
         import av
 
         if codec not in CODECS:
@@ -288,6 +418,7 @@ class VideoWriter:
             self._stream = self._container.add_stream(encoder, rate=rate)
             self._stream.width, self._stream.height = self.width, self.height
             self._stream.pix_fmt = pixel_format
+            self._stream.codec_context.gop_size = max(1, int(round(keyframe_interval * self.fps)))
             self._stream.codec_context.time_base = 1 / rate
             self._stream.options = options
         except (av.FFmpegError, ValueError) as error:

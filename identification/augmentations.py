@@ -1,0 +1,328 @@
+"""Candidate effects as physically meaningful augmentations of a nominal model (issue 8, question 2).
+
+:class:`AugmentedStructure` ``(nominal, effect, roles, setting)`` is a :class:`ModelStructure`
+whose parameters are the nominal's plus the effect's own; it is refitted by output error (free
+run) with the nominal parameters free too. Three kinds of augmentation:
+
+Input side (the inputs are transformed before the nominal simulates them)
+    ``input_delay``  ``u(t - d)``, fractional ``d`` [s] by linear interpolation, ``u(0)`` held;
+    ``actuator_lag`` ``T w' + w = u``, exact first-order filter ``a = exp(-T_s / T)``;
+    ``dead_zone``    ``c + sign(u - c) max(|u - c| - b, 0)`` about the training median ``c``;
+    ``saturation``   ``clip(s, s_low, s_high)`` of an input (or of the force output).
+Output side (added to one output, the *target*)
+    ``offset``         ``y + c``;
+    ``sensor_inertia`` ``F - m_s a``: a mass ``m_s`` between the structure and the force sensor
+                       (the rig's aluminium bar: ``F_sensor = F_c - m_bar a_bar``), ``a`` the
+                       zero-phase differentiated acceleration of the position role;
+    ``extra_mode``     ``y + g (H - 1) w~``, ``H = w_0^2 / (s^2 + 2 zeta w_0 s + w_0^2)`` (Tustin)
+                       an unmodelled compliant mode (support resonance) driven by ``w``
+                       (gain ``g``, frequency ``f_0`` [Hz], damping ``zeta``).
+Inside the dynamics
+    the nominal's own parameters when it has them: the nonlinear pantograph (``physical``):
+    ``coulomb_friction -> T_f`` (hinge friction torque), ``cubic_stiffness -> k_c3`` (head
+    suspension), ``contact_loss -> unilateral_contact = 1`` (a switch: no new parameter);
+    a nominal with ``with_effect`` (the linear OE model: a feedback term ``c phi(y)`` as an extra
+    input of its dynamics; the rigid body: ``F_c tanh(q'/v_s)``);
+    otherwise a quasi-static additive term on the force (or target) output:
+    ``F_f tanh(v / v_s)`` (friction), ``k_3 x~^3`` (stiffening), ``max(F, 0)`` (contact loss),
+    which is what these effects do to a position-driven system at low frequency.
+
+Start values come from the FROLS ranking (:mod:`identification.effects`): the variant's setting
+(delay, time constant, width, frequency) and its least-squares coefficient (``setting
+["coefficient"]``); the target output is ``setting["output"]``.
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping
+
+import numpy as np
+from scipy import signal as sps
+
+from identification.base import IdentificationData, IdentificationError, ModelStructure
+from identification.effects import EFFECTS, SignalRoles
+from identification.rigid_body import motion
+
+INPUT_SIDE = ("input_delay", "actuator_lag", "dead_zone", "saturation")
+OUTPUT_SIDE = ("offset", "sensor_inertia", "extra_mode")
+INSIDE = ("coulomb_friction", "cubic_stiffness", "contact_loss")
+#: Effects the nominal structures of this project carry as their own parameters.
+NATIVE_PARAMETERS = {"physical": {"coulomb_friction": "T_f", "cubic_stiffness": "k_c3"}}
+#: Native switches (a fixed model parameter set to 1; no new parameter).
+NATIVE_SWITCHES = {"physical": {"contact_loss": "unilateral_contact"}}
+_DERIVATIVE_CUTOFF = 0.4
+
+
+def _native(nominal: ModelStructure, effect: str) -> str | None:
+    return NATIVE_PARAMETERS.get(nominal.name, {}).get(effect)
+
+
+def _switch(nominal: ModelStructure, effect: str) -> str | None:
+    return NATIVE_SWITCHES.get(nominal.name, {}).get(effect)
+
+
+def _has_inside_form(nominal: ModelStructure, effect: str) -> bool:
+    if isinstance(nominal, AugmentedStructure):
+        return nominal.supports_inside(effect)
+    if not hasattr(nominal, "with_effect"):
+        return False
+    try:
+        nominal.with_effect(effect, {"output": nominal.output_names[0],
+                                     "drive": (nominal.input_names or ("",))[0]})
+    except IdentificationError:
+        return False
+    return True
+
+
+class AugmentedStructure(ModelStructure):
+    """The nominal structure with one candidate effect added (module notes).
+
+    Parameters
+    ----------
+    nominal : ModelStructure
+        Possibly itself augmented (effects accumulate).
+    effect : str
+        One of :data:`identification.effects.EFFECTS`.
+    roles : SignalRoles
+        Which signals are position, force, actuators.
+    setting : mapping
+        ``output`` (target output), ``signal``/``input`` (the transformed input), ``drive``,
+        ``v_s``, ``delay_s``, ``time_constant_s``, ``width``, ``low``/``high``,
+        ``frequency_hz``, ``damping``, ``coefficient`` (ranking), ``centre``, ``scale`` (typical
+        magnitude of the target output) ...
+    """
+
+    def __init__(self, nominal: ModelStructure, effect: str, roles: SignalRoles,
+                 setting: Mapping[str, Any]) -> None:
+        if effect not in EFFECTS:
+            raise IdentificationError(f"unknown effect {effect!r}; the vocabulary is {EFFECTS}")
+        self.nominal_structure, self.effect, self.roles = nominal, effect, roles
+        self.setting = dict(setting)
+        self.setting.setdefault("output", nominal.output_names[0])
+        self.name = f"{nominal.name}+{effect}"
+        self.input_names, self.output_names = nominal.input_names, nominal.output_names
+        self.base, self.mode = nominal, "wrapper"
+        self._starts: dict[str, float] = {}
+        self._bounds: dict[str, tuple[float, float]] = {}
+        self.difference_step = getattr(nominal, "difference_step", 1e-6)
+        if effect in INSIDE and _switch(nominal, effect):
+            self._build_switch(nominal, _switch(nominal, effect))
+        elif effect in INSIDE and _native(nominal, effect):
+            self.mode = "native"
+            name = _native(nominal, effect)
+            self._starts[name] = float(self.setting.get("native_start", nominal.nominal()[name]))
+        elif effect in INSIDE + ("offset",) and _has_inside_form(nominal, effect):
+            self.mode = "inside"
+            self.base = nominal.with_effect(effect, self.setting)
+        else:
+            self._build_wrapper()
+        if self.mode == "inside":
+            self.effect_parameters = tuple(n for n in self.base.parameter_names
+                                           if n not in nominal.parameter_names)
+        else:
+            self.effect_parameters = tuple(self._starts)
+        self.parameter_names = tuple(self.base.parameter_names) + tuple(
+            n for n in self._starts if n not in self.base.parameter_names)
+
+    # --- construction -------------------------------------------------------------------
+    def _build_switch(self, nominal: ModelStructure, switch: str) -> None:
+        fixed = dict(getattr(nominal, "fixed", {})) | {switch: 1.0}
+        options = {"outputs": nominal.output_names, "fixed": fixed}
+        if hasattr(nominal, "fmu_path"):
+            options["fmu_path"] = nominal.fmu_path
+        self.base, self.mode = type(nominal)(**options), "switch"
+
+    def supports_inside(self, effect: str) -> bool:
+        """Whether `effect` can still go inside the dynamics of this (augmented) model."""
+        return _has_inside_form(self.nominal_structure, effect) and self.mode != "switch"
+
+    def with_effect(self, effect: str, setting: Mapping[str, Any]) -> ModelStructure:
+        """Push an inside effect down to the innermost model that takes it (keeps this one)."""
+        if self.mode == "inside":
+            return AugmentedStructure(self.nominal_structure.with_effect(effect, setting),
+                                      self.effect, self.roles, self.setting)
+        inner = self.nominal_structure
+        if not _has_inside_form(inner, effect):
+            raise IdentificationError(f"{self.name}: no inside form for {effect!r}")
+        return AugmentedStructure(inner.with_effect(effect, setting), self.effect, self.roles,
+                                  self.setting)
+
+    def _build_wrapper(self) -> None:
+        s, effect = self.setting, self.effect
+        coefficient = float(s.get("coefficient", 0.0) or 0.0)
+        scale = float(s.get("scale", 1.0) or 1.0)
+        wide = lambda start, size: (-max(100 * abs(start), 100 * size), max(100 * abs(start), 100 * size))
+        if effect == "input_delay":
+            name = f"input_delay:{self._input()}"
+            self._add(name, float(s.get("delay_s", 0.01)), (0.0, float(s.get("max_delay_s", 1.0))))
+        elif effect == "actuator_lag":
+            name = f"actuator_lag:{self._input()}"
+            self._add(name, float(s.get("time_constant_s", 0.05)),
+                      (0.0, 100.0 * float(s.get("time_constant_s", 0.05))))
+        elif effect == "dead_zone":
+            width = float(s.get("width", s.get("half_width", 0.0)))
+            self._add(f"dead_zone:{self._input()}", width, (0.0, 10.0 * max(width, 1e-9)))
+        elif effect == "saturation":
+            signal = s.get("signal", self._input())
+            low, high = float(s.get("low", -1.0)), float(s.get("high", 1.0))
+            margin = 10.0 * max(high - low, 1e-9)
+            self._add(f"saturation:{signal}:low", low, (low - margin, high))
+            self._add(f"saturation:{signal}:high", high, (low, high + margin))
+        elif effect == "offset":
+            self._add(f"offset:{s['output']}", coefficient, wide(coefficient, scale))
+        elif effect == "sensor_inertia":
+            self._add(f"sensor_inertia:{self._force()}", -coefficient,
+                      wide(coefficient, scale / max(float(s.get("acceleration_scale", 1.0)), 1e-12)))
+        elif effect == "extra_mode":
+            f0, nyquist = float(s.get("frequency_hz", 1.0)), float(s.get("nyquist", 1e9))
+            self._add("extra_mode:gain", coefficient or 0.01 * scale, wide(coefficient, scale))
+            self._add("extra_mode:frequency", f0, (f0 / 3.0, min(3.0 * f0, 0.95 * nyquist)))
+            self._add("extra_mode:damping", float(s.get("damping", 0.05)), (1e-3, 1.0))
+        elif effect == "coulomb_friction":
+            self._add(f"coulomb_friction:{self._force()}", coefficient, wide(coefficient, scale))
+        elif effect == "cubic_stiffness":
+            self._add(f"cubic_stiffness:{s['output']}", coefficient,
+                      wide(coefficient, scale / max(float(s.get("position_scale", 1.0)) ** 3, 1e-30)))
+        elif effect == "contact_loss":
+            pass  # a clip of the force output: no parameter
+        else:  # pragma: no cover - the vocabulary is closed
+            raise IdentificationError(f"no augmentation for {effect!r}")
+
+    def _add(self, name: str, start: float, bounds: tuple[float, float]) -> None:
+        low, high = float(bounds[0]), float(bounds[1])
+        if not low < high:
+            low, high = low - 1.0, high + 1.0
+        self._starts[name] = float(min(max(start, low), high))
+        self._bounds[name] = (low, high)
+
+    def _input(self) -> str:
+        name = self.setting.get("input") or self.setting.get("signal")
+        if name in self.input_names:
+            return str(name)
+        actuators = [a for a in self.roles.actuators if a in self.input_names]
+        return (actuators or list(self.input_names))[0]
+
+    def _force(self) -> str:
+        force = self.roles.force
+        return force if force in self.output_names else str(self.setting["output"])
+
+    # --- ModelStructure ------------------------------------------------------------------
+    def nominal(self) -> dict[str, float]:
+        values = dict(self.base.nominal())
+        values.update(self._starts)
+        return values
+
+    def bounds(self) -> dict[str, tuple[float, float]]:
+        values = dict(self.base.bounds())
+        values.update(self._bounds)
+        return values
+
+    def simulate(self, parameters: Mapping[str, float], data: IdentificationData) -> np.ndarray:
+        own = {k: float(v) for k, v in parameters.items() if k in self._bounds}
+        inner = {k: v for k, v in parameters.items() if k not in self._bounds}
+        values = {**self._starts, **own}
+        if self.mode == "native":
+            return self.base.simulate({**self._starts, **inner}, data)
+        if self.mode in ("inside", "switch"):
+            return self.base.simulate(inner, data)
+        if self.effect in INPUT_SIDE and not self._on_output():
+            data = self._transform_inputs(values, data)
+            return self.base.simulate(inner, data)
+        y = np.array(self.base.simulate(inner, data), float)
+        return self._transform_outputs(values, data, y)
+
+    def _on_output(self) -> bool:
+        return self.effect == "saturation" and self.setting.get("signal") in self.output_names \
+            and self.setting.get("signal") not in self.input_names
+
+    # --- transforms -----------------------------------------------------------------------
+    def _transform_inputs(self, values: Mapping[str, float], data: IdentificationData
+                          ) -> IdentificationData:
+        name = self._input()
+        index = data.input_names.index(name)
+        u = np.array(data.inputs[:, index], float)
+        if self.effect == "input_delay":
+            d = values[f"input_delay:{name}"]
+            u = np.interp(data.time - d, data.time, u)
+        elif self.effect == "actuator_lag":
+            lag = values[f"actuator_lag:{name}"]
+            if lag > 1e-6 * data.sample_period:
+                a = math.exp(-data.sample_period / lag)
+                u = sps.lfilter([1 - a], [1, -a], u, zi=[a * u[0]])[0]
+        elif self.effect == "dead_zone":
+            width, centre = values[f"dead_zone:{name}"], float(self.setting.get("centre", 0.0))
+            shifted = u - centre
+            u = centre + np.sign(shifted) * np.maximum(np.abs(shifted) - width, 0.0)
+        elif self.effect == "saturation":
+            u = np.clip(u, values[f"saturation:{name}:low"], values[f"saturation:{name}:high"])
+        inputs = np.array(data.inputs, float)
+        inputs[:, index] = u
+        return IdentificationData(data.time, inputs, data.outputs, data.input_names,
+                                  data.output_names, data.units, data.source, data.metadata)
+
+    def _signal(self, name: str | None, data: IdentificationData, y: np.ndarray) -> np.ndarray:
+        if name in data.input_names:
+            return np.asarray(data.input(name), float)
+        if name in self.output_names:
+            return y[:, self.output_names.index(name)]
+        raise IdentificationError(f"{self.name}: signal role {name!r} is neither an input nor a "
+                                  f"simulated output ({data.input_names}, {self.output_names})")
+
+    def _motion(self, data: IdentificationData, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        position = self._signal(self.roles.position, data, y)
+        return motion(position, data.sample_period, _DERIVATIVE_CUTOFF)
+
+    def _transform_outputs(self, values: Mapping[str, float], data: IdentificationData,
+                           y: np.ndarray) -> np.ndarray:
+        s, effect = self.setting, self.effect
+        target = self.output_names.index(self._force() if effect in
+                                         ("sensor_inertia", "coulomb_friction", "contact_loss")
+                                         else s["output"])
+        if effect == "offset":
+            y[:, target] += values[f"offset:{s['output']}"]
+        elif effect == "sensor_inertia":
+            y[:, target] -= values[f"sensor_inertia:{self._force()}"] * self._motion(data, y)[1]
+        elif effect == "extra_mode":
+            drive = self._signal(s.get("drive") or self._input(), data, y)
+            y[:, target] += values["extra_mode:gain"] * mode_response(
+                drive - drive[0], values["extra_mode:frequency"], values["extra_mode:damping"],
+                data.sample_period)
+        elif effect == "coulomb_friction":
+            velocity = self._motion(data, y)[0]
+            width = float(s.get("v_s", 0.0))
+            shape = np.tanh(velocity / width) if width > 0 else np.sign(velocity)
+            y[:, target] += values[f"coulomb_friction:{self._force()}"] * shape
+        elif effect == "cubic_stiffness":
+            x = self._signal(self.roles.position, data, y) - float(s.get("centre", 0.0))
+            y[:, target] += values[f"cubic_stiffness:{s['output']}"] * x ** 3
+        elif effect == "contact_loss":
+            y[:, target] = np.maximum(y[:, target], 0.0)
+        elif effect == "saturation":
+            signal = s["signal"]
+            y[:, target] = np.clip(y[:, target], values[f"saturation:{signal}:low"],
+                                   values[f"saturation:{signal}:high"])
+        return y
+
+
+def mode_response(w: np.ndarray, frequency: float, damping: float, sample_period: float) -> np.ndarray:
+    """``(H - 1) w`` of the second-order mode ``H = w0^2 / (s^2 + 2 zeta w0 s + w0^2)``
+    (Tustin), from rest: the dynamic part only (zero static gain)."""
+    if not (frequency > 0 and damping > 0) or frequency >= 0.5 / sample_period:
+        raise IdentificationError(f"extra mode: frequency {frequency} Hz / damping {damping} "
+                                  "inadmissible")
+    omega = 2 * np.pi * frequency
+    b, a = sps.bilinear([omega ** 2], [1, 2 * damping * omega, omega ** 2], 1 / sample_period)
+    return sps.lfilter(b, a, w) - w
+
+
+def describe_augmentation(structure: AugmentedStructure) -> str:
+    """One line: the effect, how it enters and its parameters."""
+    where = {"native": "the nominal's own parameter", "switch": "a model switch",
+             "inside": "inside the dynamics", "wrapper": "input side" if structure.effect in
+             INPUT_SIDE else "output side"}[structure.mode]
+    return (f"{structure.effect} ({where}; parameters "
+            f"{', '.join(structure.effect_parameters) or 'none'})")
+
+
+__all__ = ["AugmentedStructure", "mode_response", "describe_augmentation", "INPUT_SIDE",
+           "OUTPUT_SIDE", "INSIDE", "NATIVE_PARAMETERS", "NATIVE_SWITCHES"]

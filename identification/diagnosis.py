@@ -1,0 +1,385 @@
+"""Sim-to-real gap diagnosis: where the model and the measurement disagree, which unmodelled effect
+causes it, and how far the gap shrinks once that effect is in the model (issue 8).
+
+:func:`diagnose` ``(train, validation, structure=...)``:
+
+1. **Nominal.** Fit the nominal structure on the training run (output error, free run,
+   :func:`~identification.least_squares.fit_least_squares`).
+2. **Where.** :func:`~identification.residual_analysis.analyse_residuals` on the validation free-run
+   residual (fit, band and segment energy, whiteness, input cross-correlation, error model,
+   even/odd nonlinearity, conditions). The gap is *significant* when, for some output, the residual
+   is correlated with an input, with a power signal (nonlinearity tests), or its mean differs from
+   zero, each at 1 % after a Bonferroni correction over the lags and signals tested, the mean's
+   standard error from the effective sample size ``N_eff = N / (1 + 2 sum r(tau)^2)``. Whiteness alone
+   does not count: a free-run residual may be coloured by coloured measurement noise.
+3. **Which.** Rank the candidates of :data:`~identification.effects.EFFECTS` by FROLS on the
+   *training* residual (the validation run stays withheld), the nominal parameters' sensitivities
+   projected out; refit the top ``max_refits`` significant ones as
+   :class:`~identification.augmentations.AugmentedStructure` (the nominal's parameters free too).
+   An effect is accepted only when (a) ``dBIC < -10``, ``BIC = sum_j N_eff,j ln sigma_j^2 + p ln
+   N_eff`` on the training residuals, ``N_eff`` from the augmented model's residual; (b) its
+   magnitude parameter is significant, ``|theta| / sigma_theta > 3``, ``sigma_theta`` inflated by
+   ``sqrt(N / N_eff)`` for coloured residuals; (c) on the validation run the free-run fit (mean
+   over outputs) improves by more than the spread of the improvement across ``folds`` blocked
+   folds (its standard error ``std / sqrt(folds)``). The best passing candidate (largest validation improvement) is
+   accepted, and the search repeats on what remains (``max_effects``).
+4. **How far.** Per accepted effect: the validation fit before and after per output, residual
+   energy per band and segment before and after, the share of residual energy removed, and the
+   effect's parameters with their standard deviations.
+
+Verdict: ``effect`` (the ordered list), ``none`` (no effect accepted and the gap is not significant:
+within the noise) or ``unexplained`` (a significant gap that no candidate closes on withheld data,
+reported with where it lies). No attribution is forced.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Mapping, Sequence
+
+import numpy as np
+from scipy import stats
+
+from identification.augmentations import AugmentedStructure, describe_augmentation
+from identification.base import (IdentificationData, IdentificationError, ModelStructure,
+                                 fit_percent)
+from identification.diagnosis_support import (build_structure, default_roles, effective_samples,
+                                               gap_significance, judge_trial, rank_candidates,
+                                               residuals, where_summary)
+from identification.effects import EFFECTS, SignalRoles
+from identification.least_squares import fit_least_squares
+from identification.residual_analysis import OutputAnalysis, _jsonable, analyse_residuals
+
+Progress = Callable[[str], None]
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One candidate refitted in one round and how it was judged."""
+
+    effect: str
+    variant: str
+    err: float
+    description: str
+    parameters: Mapping[str, float]
+    std: Mapping[str, float]
+    significance: float
+    delta_bic: float
+    improvement: float
+    fold_improvements: tuple[float, ...]
+    fold_spread: float
+    fit_train: Mapping[str, float]
+    fit_validation: Mapping[str, float]
+    accepted: bool = False
+    failed: tuple[str, ...] = ()
+    message: str = ""
+
+
+@dataclass(frozen=True)
+class Step:
+    """An accepted effect and how far it shrinks the gap on the validation run."""
+
+    effect: str
+    description: str
+    parameters: Mapping[str, float]
+    std: Mapping[str, float]
+    fit_before: Mapping[str, float]
+    fit_after: Mapping[str, float]
+    energy_removed: Mapping[str, float]
+    """Share of the validation residual energy removed, per output."""
+    bands: Mapping[str, Mapping[str, list]]
+    """Per output: band edges [Hz] and residual power before/after per band."""
+    segments: Mapping[str, Mapping[str, list]]
+    """Per output: window start times [s] and residual RMS before/after."""
+
+
+@dataclass(frozen=True, eq=False)
+class Diagnosis:
+    """What :func:`diagnose` found (see the module notes); :meth:`to_dict` is the JSON report."""
+
+    verdict: str
+    effects: tuple[str, ...]
+    structure: str
+    output_names: tuple[str, ...]
+    fit_before: Mapping[str, float]
+    fit_after: Mapping[str, float]
+    fit_train: Mapping[str, float]
+    nominal_parameters: Mapping[str, float]
+    final_parameters: Mapping[str, float]
+    gap: Mapping[str, Any]
+    remaining_gap: Mapping[str, Any]
+    where: Mapping[str, Any]
+    rounds: tuple[Mapping[str, Any], ...]
+    steps: tuple[Step, ...]
+    summary: str
+    wall_time: float
+    analysis_before: tuple[OutputAnalysis, ...] = field(default=(), repr=False)
+    analysis_after: tuple[OutputAnalysis, ...] = field(default=(), repr=False)
+    series: Mapping[str, np.ndarray] = field(default_factory=dict, repr=False)
+
+    def gap_closed(self) -> dict[str, float]:
+        """Per output: share of the validation residual energy removed by all accepted effects."""
+        return {o: 1.0 - ((100 - self.fit_after[o]) / (100 - self.fit_before[o])) ** 2
+                if self.fit_before[o] < 100 else math.nan for o in self.output_names}
+
+    def to_dict(self) -> dict:
+        """JSON-ready: verdict, effects, per-output fits, where, rounds, steps, summary."""
+        outputs = {o: {"fit_before": self.fit_before[o], "fit_after": self.fit_after[o],
+                       "fit_train": self.fit_train.get(o), "gap_closed": self.gap_closed()[o]}
+                   for o in self.output_names}
+        return _jsonable({
+            "verdict": self.verdict, "effects": list(self.effects), "structure": self.structure,
+            "outputs": outputs, "fit_before": dict(self.fit_before),
+            "fit_after": dict(self.fit_after), "summary": self.summary,
+            "nominal_parameters": dict(self.nominal_parameters),
+            "final_parameters": dict(self.final_parameters), "gap": dict(self.gap),
+            "remaining_gap": dict(self.remaining_gap), "where": dict(self.where),
+            "rounds": list(self.rounds),
+            "steps": [step.__dict__ for step in self.steps],
+            "analysis": [a.to_dict() for a in self.analysis_before],
+            "wall_time": self.wall_time})
+
+
+@dataclass
+class _Model:
+    """The current model of the search: structure, parameters, free parameters."""
+
+    structure: ModelStructure
+    parameters: dict[str, float]
+    free: tuple[str, ...]
+    std: dict[str, float] = field(default_factory=dict)
+
+
+def diagnose(train: IdentificationData, validation: IdentificationData, *,
+             structure: str | ModelStructure,
+             structure_options: Mapping[str, Any] | None = None,
+             roles: SignalRoles | None = None, candidates: Sequence[str] = EFFECTS,
+             max_effects: int = 3, max_refits: int = 3, executor: Any = None,
+             progress: Progress | None = None, folds: int = 4,
+             max_evaluations: int = 400) -> Diagnosis:
+    """Diagnose the gap between a model structure and data (module notes).
+
+    Parameters
+    ----------
+    train, validation : IdentificationData
+        Same input and output names; the validation run is used only for judging and reporting.
+    structure : str or ModelStructure
+        ``physical``, ``physical-linear``, ``two-mass``, ``three-mass`` (``-friction``),
+        ``linear-N`` (output error of order N), ``rigid-body``, or a structure instance.
+    structure_options : mapping, optional
+        ``free`` (the nominal's free parameters), ``fixed``, and the structure's options
+        (``centre``, ``input_delay`` for ``linear-N``; ``position``, ``cutoff`` for ``rigid-body``).
+    roles : SignalRoles, optional
+        Which signals are position, force and actuators (default from the structure).
+    candidates : sequence of str
+        Effects to consider (a subset of :data:`EFFECTS`).
+    max_effects, max_refits : int
+        Effects accepted at most; candidates refitted per round.
+    executor : concurrent.futures.Executor, optional
+        Parallel Jacobian columns in the refits.
+    progress : callable, optional
+        Receives progress lines.
+    folds : int
+        Blocked folds of the validation run for the improvement's spread.
+    max_evaluations : int
+        Model simulations per least-squares fit.
+    """
+    started = time.perf_counter()
+    say = progress or (lambda line: None)
+    unknown = [c for c in candidates if c not in EFFECTS]
+    if unknown:
+        raise IdentificationError(f"unknown candidate effect(s) {unknown}; the vocabulary is "
+                                  f"{EFFECTS}")
+    if train.input_names != validation.input_names or \
+            train.output_names != validation.output_names:
+        raise IdentificationError(f"training ({train.input_names} -> {train.output_names}) and "
+                                  f"validation ({validation.input_names} -> "
+                                  f"{validation.output_names}) signals differ")
+    options = dict(structure_options or {})
+    nominal, free = build_structure(structure, train, options)
+    roles = roles or default_roles(nominal, train)
+    covered = [c for c in candidates if c in getattr(nominal, "covered_effects", ())]
+    if covered:
+        say(f"diagnose: {nominal.name} already holds {covered}; not candidates")
+        candidates = [c for c in candidates if c not in covered]
+    fit_options = {"executor": executor, "max_evaluations": max_evaluations}
+    say(f"diagnose: nominal {nominal.name}, {len(free)} free parameters, {len(train)} training "
+        f"and {len(validation)} validation samples, outputs {list(train.output_names)}")
+    result = fit_least_squares(nominal, train.select_outputs(_fitted(nominal, train)), free=free,
+                               progress=_indent(progress), **fit_options)
+    model = _Model(nominal, dict(result.parameters), tuple(free), dict(result.std))
+    say(f"diagnose: nominal fit on training: " + _fits(result.fit))
+    before = _simulate(model, validation)
+    analysis_before = _analyse(validation, before, model, roles)
+    gap = gap_significance(analysis_before, validation)
+    fit_before = _fit(validation, before)
+    say("diagnose: where: validation fit " + _fits(fit_before) + "; gap " +
+        ("significant: " + "; ".join(gap["reasons"]) if gap["significant"] else "within the noise"))
+    rounds, steps, accepted = [], [], []
+    current = before
+    for round_index in range(max_effects):
+        remaining = [c for c in candidates if c not in accepted]
+        ranking = rank_candidates(model, train, roles, remaining, max_refits)
+        say(f"diagnose: round {round_index + 1}: ranked on the training residual: " +
+            (", ".join(f"{c['effect']} (ERR {c['err']:.3f})" for c in ranking["top"]) or
+             "no significant candidate"))
+        trials = [_try(model, c, train, validation, current, roles, folds, fit_options, say)
+                  for c in ranking["top"]]
+        passing = [t for t in trials if t[0].accepted]
+        rounds.append({"ranking": ranking["per_output"], "tried": [t[0].__dict__ for t in trials]})
+        if not passing:
+            say("diagnose: no candidate passes on the withheld data; stop")
+            break
+        trial, new_model, simulated = max(passing, key=lambda t: t[0].improvement)
+        steps.append(_step(trial, validation, current, simulated))
+        accepted.append(trial.effect)
+        say(f"diagnose: accepted {trial.effect}: validation fit " + _fits(trial.fit_validation))
+        model, current = new_model, simulated
+    analysis_after = _analyse(validation, current, model, roles) if steps else analysis_before
+    remaining_gap = gap_significance(analysis_after, validation) if steps else gap
+    verdict = "effect" if steps else ("unexplained" if gap["significant"] else "none")
+    fit_after = _fit(validation, current)
+    where = where_summary(analysis_before, validation)
+    summary = _summary(verdict, accepted, fit_before, fit_after, where, remaining_gap)
+    say(f"diagnose: verdict {verdict}: {summary}")
+    return Diagnosis(
+        verdict, tuple(accepted), nominal.name, validation.output_names, fit_before, fit_after,
+        dict(result.fit), dict(result.parameters), dict(model.parameters), gap, remaining_gap,
+        where, tuple(rounds), tuple(steps), summary, time.perf_counter() - started,
+        tuple(analysis_before), tuple(analysis_after),
+        {"time": validation.time, "measured": validation.outputs, "before": before,
+         "after": current})
+
+
+def _indent(progress: Progress | None) -> Progress | None:
+    return None if progress is None else (lambda line: progress("    " + line))
+
+
+def _fits(fits: Mapping[str, float]) -> str:
+    return ", ".join(f"{k} {v:.2f} %" for k, v in fits.items())
+
+
+def _fitted(structure: ModelStructure, data: IdentificationData) -> tuple[str, ...]:
+    missing = [o for o in data.output_names if o not in structure.output_names]
+    if missing:
+        raise IdentificationError(f"{structure.name} does not simulate {missing} "
+                                  f"(it has {list(structure.output_names)})")
+    return data.output_names
+
+
+def _simulate(model: _Model, data: IdentificationData) -> np.ndarray:
+    y = np.asarray(model.structure.simulate(model.parameters, data), float)
+    return y[:, [model.structure.output_names.index(o) for o in data.output_names]]
+
+
+def _fit(data: IdentificationData, simulated: np.ndarray) -> dict[str, float]:
+    return {o: float(fit_percent(data.outputs[:, j], simulated[:, j]))
+            for j, o in enumerate(data.output_names)}
+
+
+def _analyse(data: IdentificationData, simulated: np.ndarray, model: _Model,
+             roles: SignalRoles) -> list[OutputAnalysis]:
+    from identification.rigid_body import motion
+
+    conditions = {n: data.input(n) for n in data.input_names}
+    velocity = None
+    position = roles.position
+    if position in data.input_names:
+        velocity = motion(data.input(position), data.sample_period, 0.4)[0]
+    elif position in data.output_names:
+        velocity = motion(simulated[:, data.output_names.index(position)], data.sample_period,
+                          0.4)[0]
+    orders = (min(20, max(2, len(data) // 50)), min(4, max(1, len(data) // 200)))
+    return analyse_residuals(data.inputs, data.outputs, simulated, data.sample_period,
+                             input_names=data.input_names, output_names=data.output_names,
+                             conditions=conditions, velocity=velocity, error_model_orders=orders)
+
+
+def _try(model: _Model, candidate: Mapping[str, Any], train: IdentificationData,
+         validation: IdentificationData, current: np.ndarray, roles: SignalRoles, folds: int,
+         fit_options: Mapping[str, Any], say: Progress) -> tuple[Trial, _Model, np.ndarray]:
+    """Refit the nominal with one candidate and judge it."""
+    effect = candidate["effect"]
+    try:
+        structure = AugmentedStructure(model.structure, effect, roles, candidate["setting"])
+        free = tuple(model.free) + tuple(p for p in structure.effect_parameters
+                                         if p not in model.free)
+        result = _refit(structure, model, train, free, fit_options)
+        new = _Model(structure, dict(result.parameters), free, dict(result.std))
+        simulated = _simulate(new, validation)
+        trial = judge_trial(candidate, structure, result, model, train, validation, current,
+                            simulated, folds)
+    except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError) as error:
+        say(f"  {effect}: refit failed ({error})")
+        trial = Trial(effect, candidate["variant"], candidate["err"], effect, {}, {}, math.nan,
+                      math.nan, math.nan, (), math.nan, {}, {}, False, ("refit failed",),
+                      str(error))
+        return trial, model, current
+    trial = Trial(**{**trial, "description": describe_augmentation(structure)})
+    say(f"  {effect}: dBIC {trial.delta_bic:.1f}, |theta|/sigma {trial.significance:.1f}, "
+        f"validation +{trial.improvement:.2f} points (fold spread {trial.fold_spread:.2f}): "
+        + ("accepted" if trial.accepted else "rejected (" + ", ".join(trial.failed) + ")"))
+    return trial, new, simulated
+
+
+def _refit(structure: AugmentedStructure, model: _Model, train: IdentificationData,
+           free: tuple[str, ...], fit_options: Mapping[str, Any]):
+    """Output-error refit from the current parameters and the effect's start values; when the
+    start is invalid (an unstable feedback), from the effect scaled towards its neutral value."""
+    initial = {k: v for k, v in model.parameters.items()
+               if k in structure.parameter_names and k not in structure.effect_parameters}
+    starts, bounds = structure.nominal(), structure.bounds()
+    initial = {k: float(min(max(v, bounds[k][0]), bounds[k][1])) if k in bounds else v
+               for k, v in initial.items()}
+    neutral = [p for p in structure.effect_parameters if bounds[p][0] <= 0.0 <= bounds[p][1]]
+    result = None
+    for factor in (1.0, 0.1, 0.0):
+        scaled = {p: starts[p] * factor for p in neutral}
+        result = fit_least_squares(structure, train, free=free, initial={**initial, **scaled},
+                                   **fit_options)
+        if not result.message.startswith("model invalid"):
+            return result
+    raise IdentificationError(f"{structure.name}: {result.message}")
+
+
+def _step(trial: Trial, data: IdentificationData, before: np.ndarray, after: np.ndarray) -> Step:
+    from identification.residual_analysis import energy_by_band, energy_by_segment
+
+    fit_before, fit_after = _fit(data, before), _fit(data, after)
+    removed, bands, segments = {}, {}, {}
+    for j, o in enumerate(data.output_names):
+        y = data.outputs[:, j]
+        ok = np.isfinite(y)
+        measured = np.where(ok, y, before[:, j])
+        e0, e1 = measured - before[:, j], np.where(ok, y, after[:, j]) - after[:, j]
+        removed[o] = 1.0 - float(np.sum(e1 ** 2) / max(np.sum(e0 ** 2), 1e-300))
+        b0 = energy_by_band(measured, e0, data.sample_period)
+        b1 = energy_by_band(measured, e1, data.sample_period, band_edges=b0.band_edges)
+        bands[o] = {"edges_hz": b0.band_edges.tolist(), "before": b0.residual_power.tolist(),
+                    "after": b1.residual_power.tolist()}
+        s0 = energy_by_segment(measured, e0, data.sample_period, start_time=float(data.time[0]))
+        s1 = energy_by_segment(measured, e1, data.sample_period, start_time=float(data.time[0]))
+        segments[o] = {"start_s": s0.start_times.tolist(), "rms_before": s0.residual_rms.tolist(),
+                       "rms_after": s1.residual_rms.tolist()}
+    return Step(trial.effect, trial.description, dict(trial.parameters), dict(trial.std),
+                fit_before, fit_after, removed, bands, segments)
+
+
+def _summary(verdict: str, effects: Sequence[str], before: Mapping[str, float],
+             after: Mapping[str, float], where: Mapping[str, Any],
+             remaining: Mapping[str, Any]) -> str:
+    if verdict == "none":
+        return ("the gap is within the noise: the validation residual is independent of the "
+                "inputs, shows no nonlinearity and no offset, and no candidate effect improves "
+                "the withheld fit significantly")
+    fits = ", ".join(f"{o} {before[o]:.1f} -> {after[o]:.1f} %" for o in before)
+    if verdict == "unexplained":
+        return (f"a significant gap that no candidate closes on the withheld data; it lies "
+                f"{where.get('text', '')}")
+    rest = "; a significant gap remains: " + "; ".join(remaining.get("reasons", [])) \
+        if remaining.get("significant") else ""
+    return f"{' then '.join(effects)}: validation fit {fits}{rest}"
+
+
+__all__ = ["diagnose", "Diagnosis", "Trial", "Step", "effective_samples"]

@@ -1,0 +1,404 @@
+"""The pieces of :func:`identification.diagnosis.diagnose`: structures by name, signal roles, the
+candidate ranking on the training residual, the acceptance tests and the gap's significance
+(the model error model is tested only where the input carries power, within 40 dB of its peak:
+beyond the excited band its estimate is an extrapolation).
+
+Formulas (the diagnosis reference, ``identification_and_diagnosis.md``):
+
+- effective sample size of a coloured residual ``N_eff = N / (1 + 2 sum_{tau=1..M} r(tau)^2)``;
+- ``BIC = sum_j N_eff,j ln sigma_j^2 + p ln N_eff`` (``sigma_j^2`` the mean squared residual of
+  output ``j``), an effect accepted only with ``dBIC < -10``;
+- ``|theta| / (sigma_theta sqrt(N / N_eff)) > 3`` for the effect's magnitude parameter;
+- validation improvement (mean fit over outputs, free run) larger than the spread of the
+  improvement over ``K`` blocked folds, taken as the standard error of their mean
+  (``std_k / sqrt(K)``): the raw standard deviation would reject real effects on non-stationary
+  validation runs (the Silverbox "arrow" grows in amplitude, so an effect helps most at its end).
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+from scipy import stats
+
+from identification.base import (IdentificationData, IdentificationError, IdentificationResult,
+                                 ModelStructure, fit_percent)
+from identification.effects import (SignalRoles, build_candidate_regressors, filter_sensitivity,
+                                    name_signals, rank_effects)
+
+#: Parameter of an effect whose significance is tested (default: its first parameter).
+MAGNITUDE = {"extra_mode": "extra_mode:gain"}
+#: Effects without a magnitude parameter (judged by dBIC and validation only).
+NO_MAGNITUDE = ("saturation", "contact_loss")
+BIC_THRESHOLD = -10.0
+SIGNIFICANCE = 3.0
+PANTOGRAPH_SIGNALS = {"eta", "p", "F_c", "y_cb", "xi"}
+
+
+# --- structures and roles -------------------------------------------------------------------
+
+def build_structure(structure: str | ModelStructure, train: IdentificationData,
+                    options: dict[str, Any]) -> tuple[ModelStructure, tuple[str, ...]]:
+    """The nominal structure (a name or an instance) and its free parameters.
+
+    ``options``: ``free``, ``fixed`` and the structure's constructor options.
+    """
+    free = options.pop("free", None)
+    if isinstance(structure, ModelStructure):
+        model = structure
+    else:
+        model = _named_structure(str(structure), train, options)
+    if free is None:
+        free = model.default_free() if hasattr(model, "default_free") else model.parameter_names
+    unknown = [n for n in free if n not in model.parameter_names]
+    if unknown:
+        raise IdentificationError(f"{model.name}: free parameter(s) {unknown} unknown; known: "
+                                  f"{list(model.parameter_names)}")
+    return model, tuple(free)
+
+
+def _named_structure(name: str, train: IdentificationData, options: dict[str, Any]
+                     ) -> ModelStructure:
+    from identification.output_error import linear_output_error_from_data, order_of
+    from identification.rigid_body import rigid_body_from_data
+
+    if order_of(name) is not None:
+        return linear_output_error_from_data(train, order_of(name), **options)
+    if name == "rigid-body":
+        return rigid_body_from_data(train, **options)
+    if name in ("physical", "physical-linear"):
+        from identification.physical import PhysicalLinear, PhysicalNonlinear
+
+        kind = PhysicalNonlinear if name == "physical" else PhysicalLinear
+        return kind(outputs=train.output_names, **options)
+    if name.startswith(("two-mass", "three-mass")):
+        from identification.oscillators import OscillatorStructure
+
+        masses = 2 if name.startswith("two") else 3
+        return OscillatorStructure(masses, name.endswith("-friction"),
+                                   outputs=train.output_names, **options)
+    raise IdentificationError(f"unknown structure {name!r} for the diagnosis: physical, "
+                              "physical-linear, two-mass, three-mass (-friction), linear-N, "
+                              "rigid-body")
+
+
+def default_roles(structure: ModelStructure, data: IdentificationData) -> SignalRoles:
+    """Roles from the structure: the rigid body's position input; the pantograph's signals;
+    otherwise the first output as position and every input an actuator."""
+    if structure.name.startswith("rigid-body"):
+        return SignalRoles(position=data.input_names[0], force=None, actuators=())
+    names = set(data.input_names) | set(data.output_names)
+    if names <= PANTOGRAPH_SIGNALS:
+        return SignalRoles(position="y_cb" if "y_cb" in data.output_names else "eta",
+                           force="F_c" if "F_c" in data.output_names else None,
+                           actuators=tuple(a for a in ("eta", "p") if a in data.input_names))
+    return SignalRoles(position=data.output_names[0], force=None,
+                       actuators=tuple(data.input_names))
+
+
+# --- residuals and statistics ---------------------------------------------------------------
+
+def residuals(structure: ModelStructure, parameters: Mapping[str, float],
+              data: IdentificationData) -> tuple[np.ndarray, np.ndarray]:
+    """``(y_hat, y - y_hat)`` in the data's output order (NaN measurements give 0 residual)."""
+    y_hat = np.asarray(structure.simulate(dict(parameters), data), float)
+    y_hat = y_hat[:, [structure.output_names.index(o) for o in data.output_names]]
+    return y_hat, np.where(np.isfinite(data.outputs), data.outputs - y_hat, 0.0)
+
+
+def effective_samples(residual: np.ndarray, max_lag: int = 50) -> float:
+    """``N_eff = N / (1 + 2 sum_{tau=1..M} r(tau)^2)`` of one residual."""
+    eps = np.asarray(residual, float) - np.mean(residual)
+    n = len(eps)
+    size = 1 << int(np.ceil(np.log2(2 * n)))
+    spectrum = np.fft.rfft(eps, size)
+    r = np.fft.irfft(np.abs(spectrum) ** 2, size)[:min(max_lag, n - 1) + 1]
+    if r[0] <= 0:
+        return float(n)
+    rho = r[1:] / r[0]
+    return float(n / (1.0 + 2.0 * np.sum(rho ** 2)))
+
+
+def sensitivities(structure: ModelStructure, parameters: Mapping[str, float],
+                  free: Sequence[str], data: IdentificationData) -> np.ndarray:
+    """Forward-difference ``d y_hat / d theta``, shape ``(N, n_outputs, n_free)`` (columns of
+    parameters whose perturbation fails are left out)."""
+    y0, _ = residuals(structure, parameters, data)
+    step = float(getattr(structure, "difference_step", 1e-6))
+    step = max(step, 1e-6)
+    bounds = structure.bounds()
+    columns = []
+    for name in free:
+        value = float(parameters[name])
+        low, high = bounds.get(name, (-math.inf, math.inf))
+        h = step * abs(value) if value != 0 else step * min(high - low, 1.0)
+        if value + h > high:
+            h = -h
+        try:
+            y1, _ = residuals(structure, {**parameters, name: value + h}, data)
+        except (IdentificationError, ValueError, ArithmeticError):
+            continue
+        columns.append((y1 - y0) / h)
+    if not columns:
+        return np.zeros((len(data), len(data.output_names), 0))
+    return np.stack(columns, axis=2)
+
+
+# --- the ranking on the training residual -----------------------------------------------------
+
+def _innermost(structure: ModelStructure) -> ModelStructure:
+    while hasattr(structure, "nominal_structure"):
+        structure = structure.base if getattr(structure, "mode", "") == "inside" else \
+            structure.nominal_structure
+    return structure
+
+
+def _output_filter(structure: ModelStructure, parameters: Mapping[str, float], output: str,
+                   drive: str):
+    from identification.output_error import LinearOutputError
+
+    inner = _innermost(structure)
+    if not isinstance(inner, LinearOutputError):
+        return None
+    f, b = inner.polynomials({k: v for k, v in parameters.items()
+                              if k in inner.parameter_names}, output)
+    return filter_sensitivity(b[drive], f)
+
+
+def rank_candidates(model: Any, train: IdentificationData, roles: SignalRoles,
+                    candidates: Sequence[str], max_refits: int) -> dict[str, Any]:
+    """FROLS ranking per output of the current model's training residual; the top candidates
+    (significant, best ERR over the outputs) with start settings for their augmentation."""
+    y_hat, eps = residuals(model.structure, model.parameters, train)
+    signals = name_signals(train.inputs, train.input_names, y_hat, train.output_names)
+    regressors = {k: v for k, v in build_candidate_regressors(
+        signals, train.sample_period, roles=roles).items() if k in candidates}
+    if not regressors:
+        return {"top": [], "per_output": {}}
+    jac = sensitivities(model.structure, model.parameters, model.free, train)
+    drive = next((a for a in roles.actuators if a in train.input_names), train.input_names[0])
+    best: dict[str, dict[str, Any]] = {}
+    per_output = {}
+    for j, output in enumerate(train.output_names):
+        target = eps[:, j]
+        if not np.any(target):
+            continue
+        base = jac[:, j, :] if jac.shape[2] else None
+        if base is not None:
+            base = base[:, np.linalg.norm(base, axis=0) > 0]
+        sensitivity = _output_filter(model.structure, model.parameters, output, drive)
+        try:
+            ranking = rank_effects(target, regressors, base=base, sensitivity=sensitivity,
+                                   max_steps=3)
+        except IdentificationError:
+            continue
+        per_output[output] = ranking.to_dict()
+        for score in ranking.first_step:
+            if not (score.significant and score.err >= 0.01):
+                continue
+            if score.effect not in best or score.err > best[score.effect]["err"]:
+                coefficient = _coefficient(regressors[score.effect][score.variant][0], target,
+                                           base, sensitivity)
+                best[score.effect] = {
+                    "effect": score.effect, "variant": score.variant, "err": float(score.err),
+                    "output": output, "setting": _setting(score, output, coefficient, signals,
+                                                          train, roles, drive)}
+    top = sorted(best.values(), key=lambda c: -c["err"])[:max_refits]
+    return {"top": top, "per_output": per_output}
+
+
+def _coefficient(x: np.ndarray, target: np.ndarray, base: np.ndarray | None, sensitivity) -> float:
+    x = sensitivity(x) if sensitivity else np.asarray(x, float)
+    r = np.asarray(target, float)
+    if base is not None and base.shape[1]:
+        q, _ = np.linalg.qr(base)
+        x, r = x - q @ (q.T @ x), r - q @ (q.T @ r)
+    xx = float(x @ x)
+    return float(x @ r / xx) if xx > 0 else 0.0
+
+
+def _setting(score: Any, output: str, coefficient: float, signals: Mapping[str, np.ndarray],
+             data: IdentificationData, roles: SignalRoles, drive: str) -> dict[str, Any]:
+    y = signals[output]
+    setting = {**dict(score.setting), "output": output, "coefficient": coefficient,
+               "scale": float(np.std(y)) or 1.0, "nyquist": 0.5 / data.sample_period,
+               "drive": score.setting.get("drive", drive), "start": coefficient,
+               "native_start": abs(coefficient) if score.effect == "coulomb_friction" else 0.0,
+               "max_delay_s": 0.1 * (data.time[-1] - data.time[0])}
+    position = signals.get(roles.position) if roles.position else None
+    if position is not None:
+        setting["centre"] = float(np.median(position))
+        setting["position_scale"] = float(np.std(position)) or 1.0
+        from identification.rigid_body import motion
+
+        setting["acceleration_scale"] = float(np.std(motion(position, data.sample_period, 0.4)[1])) \
+            or 1.0
+    signal = setting.get("signal") or setting.get("input")
+    if score.effect == "dead_zone" and signal in signals:
+        setting["centre"] = float(np.median(signals[signal]))
+    if setting["drive"] not in data.input_names and score.effect != "extra_mode":
+        setting["drive"] = drive
+    phi_scale = {"cubic_stiffness": setting.get("position_scale", 1.0) ** 3}.get(score.effect, 1.0)
+    u_scale = float(np.std(signals[drive])) if drive in signals else 1.0
+    setting["bound"] = 100.0 * max(abs(coefficient), u_scale / max(phi_scale, 1e-30))
+    return setting
+
+
+# --- judging a refit ------------------------------------------------------------------------
+
+def judge_trial(candidate: Mapping[str, Any], structure: Any, result: IdentificationResult,
+                model: Any, train: IdentificationData, validation: IdentificationData,
+                current: np.ndarray, simulated: np.ndarray, folds: int) -> dict[str, Any]:
+    """The acceptance tests of one refitted candidate (module notes); the Trial's fields."""
+    _, eps0 = residuals(model.structure, model.parameters, train)
+    _, eps1 = residuals(structure, result.parameters, train)
+    valid = np.isfinite(train.outputs)
+    n_eff = [effective_samples(eps1[valid[:, j], j]) for j in range(eps1.shape[1])]
+    delta = 0.0
+    for j in range(eps1.shape[1]):
+        s0 = float(np.mean(eps0[valid[:, j], j] ** 2))
+        s1 = float(np.mean(eps1[valid[:, j], j] ** 2))
+        delta += n_eff[j] * math.log(max(s1, 1e-300) / max(s0, 1e-300))
+    p = len(structure.effect_parameters)
+    delta_bic = delta + p * math.log(max(sum(n_eff), 2.0))
+    inflation = math.sqrt(valid.sum() / max(sum(n_eff), 1.0))
+    effect = candidate["effect"]
+    own = {n: float(result.parameters[n]) for n in structure.effect_parameters}
+    std = {n: float(result.std.get(n, math.nan)) * inflation for n in structure.effect_parameters}
+    if effect in NO_MAGNITUDE or not own:
+        significance = math.inf
+    else:
+        name = MAGNITUDE.get(effect, structure.effect_parameters[0])
+        s = std.get(name, math.nan)
+        significance = abs(own[name]) / s if s > 0 else (math.inf if s == 0 else 0.0)
+    fit_before = _fits(validation, current)
+    fit_after = _fits(validation, simulated)
+    improvement = float(np.mean([fit_after[o] - fit_before[o] for o in fit_before]))
+    blocks = np.array_split(np.arange(len(validation)), max(1, folds))
+    per_fold = []
+    for block in blocks:
+        y = validation.outputs[block]
+        d = [float(fit_percent(y[:, j], simulated[block, j]) - fit_percent(y[:, j], current[block, j]))
+             for j in range(y.shape[1])]
+        per_fold.append(float(np.nanmean(d)))
+    spread = float(np.std(per_fold, ddof=1)) if len(per_fold) > 1 else 0.0
+    standard_error = spread / math.sqrt(len(per_fold))
+    failed = []
+    if not delta_bic < BIC_THRESHOLD:
+        failed.append(f"dBIC {delta_bic:.1f} >= {BIC_THRESHOLD:g}")
+    if not significance > SIGNIFICANCE:
+        failed.append(f"|theta|/sigma {significance:.2f} <= {SIGNIFICANCE:g}")
+    if not (improvement > standard_error and improvement > 0):
+        failed.append(f"validation improvement {improvement:.2f} not above the folds' standard "
+                      f"error {standard_error:.2f}")
+    return {"effect": effect, "variant": candidate["variant"], "err": candidate["err"],
+            "description": effect, "parameters": own, "std": std, "significance": significance,
+            "delta_bic": delta_bic, "improvement": improvement,
+            "fold_improvements": tuple(per_fold), "fold_spread": spread,
+            "fit_train": dict(result.fit), "fit_validation": fit_after, "accepted": not failed,
+            "failed": tuple(failed), "message": result.message}
+
+
+def _fits(data: IdentificationData, simulated: np.ndarray) -> dict[str, float]:
+    return {o: float(fit_percent(data.outputs[:, j], simulated[:, j]))
+            for j, o in enumerate(data.output_names)}
+
+
+# --- the gap and where it lies --------------------------------------------------------------
+
+def gap_significance(analysis: Sequence[Any], data: IdentificationData,
+                     alpha: float = 0.01) -> dict[str, Any]:
+    """Whether the validation residual holds a gap beyond the noise (module notes of
+    :mod:`identification.diagnosis`); the reasons name the output and the test."""
+    reasons, per_output = [], {}  # tests: cross-correlation, error model, nonlinearity, mean
+    n_outputs = max(1, len(analysis))
+    for a in analysis:
+        found = []
+        crosses = a.cross_correlation
+        for c in crosses:
+            z_b = stats.norm.isf(alpha / (2 * len(c.lags) * len(crosses) * n_outputs))
+            ratio = float(np.max(np.abs(c.correlation)) / (c.bound / 2.58))
+            if ratio > z_b:
+                found.append(f"{a.output_name} residual correlated with input {c.input_name} "
+                             f"(peak {c.peak_value:.2f} at lag {c.peak_lag})")
+        test = a.nonlinearity
+        z_n = stats.norm.isf(alpha / (2 * 41 * len(test.signals) * n_outputs))
+        strength = np.asarray(test.max_correlation) / (np.asarray(test.bounds) / 2.58)
+        for name, value in zip(test.signals, strength):
+            if value > z_n:
+                found.append(f"{a.output_name} residual correlated with {name} (nonlinearity)")
+        model = a.error_model
+        level = math.sqrt(stats.chi2.ppf(1 - 0.01, 2))
+        z_e = math.sqrt(stats.chi2.ppf(1 - alpha / (model.order_b * len(model.input_names)
+                                                    * n_outputs), 2))
+        for i, name in enumerate(model.input_names):
+            ratio = np.abs(model.response[i]) / np.maximum(model.radius[i] / level, 1e-300)
+            ratio = np.where(_excited(data.input(name), data.sample_period, model.frequencies),
+                             ratio, 0.0)
+            if np.max(ratio) > z_e:
+                k = int(np.argmax(ratio))
+                found.append(f"{a.output_name}: model error model from {name} leaves its "
+                             f"confidence band (near {model.frequencies[k]:.3g} Hz)")
+        r = np.asarray(a.whiteness.autocorrelation)
+        n = len(data)
+        n_eff = n / (1.0 + 2.0 * float(np.sum(r ** 2)))
+        sd = math.sqrt(max(a.residual_rms ** 2 - a.residual_mean ** 2, 0.0))
+        z_m = stats.norm.isf(alpha / (2 * n_outputs))
+        if sd > 0 and abs(a.residual_mean) > z_m * sd / math.sqrt(n_eff):
+            found.append(f"{a.output_name} residual mean {a.residual_mean:.4g} differs from zero")
+        per_output[a.output_name] = {"significant": bool(found), "reasons": found,
+                                     "white": bool(a.whiteness.white), "fit": a.fit}
+        reasons += found
+    return {"significant": bool(reasons), "reasons": reasons, "per_output": per_output}
+
+
+def _excited(u: np.ndarray, sample_period: float, frequencies: np.ndarray,
+             dynamic_range_db: float = 40.0) -> np.ndarray:
+    """Frequencies where the input carries power within `dynamic_range_db` of its peak: the error
+    model is only tested there (elsewhere its estimate extrapolates)."""
+    from scipy import signal as sps
+
+    f, power = sps.welch(np.asarray(u, float) - np.mean(u), 1.0 / sample_period,
+                         nperseg=min(len(u), 256))
+    level = np.interp(frequencies, f, power)
+    return level > np.max(power) * 10 ** (-dynamic_range_db / 10)
+
+
+def where_summary(analysis: Sequence[Any], data: IdentificationData) -> dict[str, Any]:
+    """Per output: the band, time window and operating condition where the residual gathers, the
+    nonlinearity kind and the cross-correlation hints; ``text`` says it in a sentence."""
+    out, texts = {}, []
+    for a in analysis:
+        bands = a.bands
+        k = int(np.argmax(bands.share))
+        band = (float(bands.band_edges[k]), float(bands.band_edges[k + 1]))
+        segments = a.segments
+        s = int(np.argmax(segments.residual_rms))
+        condition = None
+        for c in a.conditions:
+            i = int(np.nanargmax(c.concentration))
+            if condition is None or c.concentration[i] > condition["concentration"]:
+                condition = {"variable": c.variable, "low": float(c.edges[i]),
+                             "high": float(c.edges[i + 1]),
+                             "concentration": float(c.concentration[i])}
+        hints = [h for c in a.cross_correlation for h in c.hints]
+        out[a.output_name] = {
+            "fit": a.fit, "band_hz": band, "band_share": float(bands.share[k]),
+            "band_ratio": float(bands.ratio[k]), "worst_window_start_s": float(segments.start_times[s]),
+            "worst_window_s": float(segments.window), "condition": condition,
+            "nonlinearity": a.nonlinearity.kind, "hints": hints}
+        text = (f"in {a.output_name} (fit {a.fit:.1f} %), {100 * bands.share[k]:.0f} % of its "
+                f"residual power in {band[0]:.3g}-{band[1]:.3g} Hz")
+        if condition:
+            text += (f", gathered where {condition['variable']} is in [{condition['low']:.3g}, "
+                     f"{condition['high']:.3g}] ({condition['concentration']:.1f}x its time share)")
+        if a.nonlinearity.kind != "none":
+            text += f", {a.nonlinearity.kind} nonlinearity"
+        texts.append(text)
+    out["text"] = "; ".join(texts)
+    return out
+
+
+__all__ = ["build_structure", "default_roles", "residuals", "effective_samples", "sensitivities",
+           "rank_candidates", "judge_trial", "gap_significance", "where_summary"]

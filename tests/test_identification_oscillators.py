@@ -1,0 +1,170 @@
+"""Oscillator structures (thesis 2.6, 2.7, 4.6, 4.7): simulation against the symbolic model
+integrated by solve_ivp, and recovery of known parameters from noisy self-simulated data."""
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+
+from fmu_src.models import Model
+from identification.base import IdentificationData, IdentificationError, identifier
+from identification.oscillators import OscillatorStructure, coulomb_flow, identify_oscillator
+
+PERIOD = 0.02  # 50 Hz, the identification rate (thesis 4.2)
+
+
+def aprbs(rng, n, low, high, hold_min, hold_max):
+    """Amplitude-modulated pseudo-random steps, smoothed over two samples."""
+    values, k = np.empty(n), 0
+    while k < n:
+        hold = rng.integers(hold_min, hold_max)
+        values[k:k + hold] = rng.uniform(low, high)
+        k += hold
+    return np.convolve(values, np.ones(3) / 3, mode="same")
+
+
+def make_inputs(seed=0, seconds=40.0):
+    rng = np.random.default_rng(seed)
+    n = int(seconds / PERIOD)
+    t = np.arange(n) * PERIOD
+    eta = aprbs(rng, n, 1.95, 2.05, 10, 60)
+    p = aprbs(rng, n, 3.5, 4.5, 25, 150)
+    eta[:5], p[:5] = eta[5], p[5]
+    return t, eta, p
+
+
+def data_for(t, eta, p, outputs, names):
+    return IdentificationData(t, np.column_stack([eta, p]), outputs, ("eta", "p"), names,
+                              source="test")
+
+
+def true_parameters(masses, friction):
+    s = OscillatorStructure(masses, friction)
+    values = s.nominal()
+    # dampers raised from the EN 50318 values: the head mode on k_E then has about 13 % damping
+    # (with c2 = 10 N s/m it has 0.8 %: the fit needs about three times the evaluations and
+    # some starts end in a local minimum of the output error)
+    values.update(p_gain=130.0, F_0=-420.0, y_0=1.93, c2=150.0)
+    if masses == 3:
+        values.update(c3=150.0)
+    if friction:
+        values.update({f"F_f{i + 1}": 6.0 for i in range(masses)}, v_eps=1e-3)
+    return values
+
+
+def reference_outputs(masses, parameters, t, eta, p):
+    """The fmu_src symbolic model (sympy -> lambdify) integrated by DOP853, inputs linear."""
+    structure = OscillatorStructure(masses, "F_f1" in parameters)
+    model = Model(structure.model_name, structure.fmu_parameters(parameters))
+    x0 = model.equilibrium(eta[0], p[0])
+    sol = solve_ivp(lambda tt, x: model.derivatives(x, np.interp(tt, t, eta), np.interp(tt, t, p)),
+                    (t[0], t[-1]), x0, t_eval=t, method="DOP853", rtol=1e-9, atol=1e-11,
+                    max_step=PERIOD / 2)
+    return np.array([model.outputs(sol.y[:, k], eta[k], p[k]) for k in range(len(t))])
+
+
+@pytest.mark.parametrize("masses", [2, 3])
+def test_linear_discretisation_matches_symbolic_model(masses):
+    t, eta, p = make_inputs(1, 10.0)
+    params = true_parameters(masses, False)
+    structure = OscillatorStructure(masses, False, outputs=("y_cb", "xi", "F_c"))
+    y = structure.simulate(params, data_for(t, eta, p, np.zeros((len(t), 3)), ("y_cb", "xi", "F_c")))
+    ref = reference_outputs(masses, params, t, eta, p)
+    error = np.abs(y - ref).max(axis=0) / np.ptp(ref, axis=0)
+    assert np.all(error < 1e-5), error
+
+
+def test_zero_order_hold_matches_held_inputs():
+    t, eta, p = make_inputs(2, 4.0)
+    params = true_parameters(2, False)
+    structure = OscillatorStructure(2, False, outputs=("y_cb", "xi", "F_c"), hold="zoh")
+    y = structure.simulate(params, data_for(t, eta, p, np.zeros((len(t), 3)), ("y_cb", "xi", "F_c")))
+    model = Model("TwoMass", structure.fmu_parameters(params))
+    x, rows = model.equilibrium(eta[0], p[0]), [model.outputs(model.equilibrium(eta[0], p[0]), eta[0], p[0])]
+    for k in range(len(t) - 1):
+        x = solve_ivp(lambda tt, s: model.derivatives(s, eta[k], p[k]), (0, PERIOD), x,
+                      rtol=1e-10, atol=1e-12).y[:, -1]
+        rows.append(model.outputs(x, eta[k + 1], p[k + 1]))
+    ref = np.array(rows)
+    assert np.all(np.abs(y - ref).max(axis=0) / np.ptp(ref, axis=0) < 1e-5)
+
+
+@pytest.mark.parametrize("masses", [2, 3])
+def test_friction_integrator_matches_symbolic_model(masses):
+    t, eta, p = make_inputs(3, 8.0)
+    params = true_parameters(masses, True)
+    structure = OscillatorStructure(masses, True, outputs=("y_cb", "xi", "F_c"))
+    y = structure.simulate(params, data_for(t, eta, p, np.zeros((len(t), 3)), ("y_cb", "xi", "F_c")))
+    ref = reference_outputs(masses, params, t, eta, p)
+    error = np.abs(y - ref).max(axis=0) / np.ptp(ref, axis=0)
+    assert np.all(error < 0.01), error
+    # friction matters on these inputs: the frictionless model differs by far more
+    linear = OscillatorStructure(masses, False, outputs=("y_cb", "xi", "F_c"))
+    y_lin = linear.simulate({k: v for k, v in params.items() if k in linear.parameter_names},
+                            data_for(t, eta, p, np.zeros((len(t), 3)), ("y_cb", "xi", "F_c")))
+    assert np.abs(y_lin - ref).max(axis=0)[2] > 5 * np.abs(y - ref).max(axis=0)[2]
+
+
+def test_coulomb_flow_is_exact():
+    v_eps, rate = 1e-3, 3.0  # F_f / m [m/s^2]
+    v0 = np.array([-2.0, -0.01, -1e-4, 0.0, 3e-4, 0.05, 5.0])
+    sol = solve_ivp(lambda t, v: -rate * np.tanh(v / v_eps), (0, 0.01), v0, method="Radau",
+                    rtol=1e-10, atol=1e-13)
+    exact = coulomb_flow(v0, np.full(v0.shape, rate * 0.01 / v_eps), v_eps)
+    np.testing.assert_allclose(exact, sol.y[:, -1], rtol=1e-6, atol=1e-10)
+
+
+def test_invalid_parameters_raise():
+    t, eta, p = make_inputs(0, 2.0)
+    data = data_for(t, eta, p, np.zeros((len(t), 2)), ("F_c", "y_cb"))
+    with pytest.raises(IdentificationError, match="m1"):
+        OscillatorStructure(2).simulate({"m1": -1.0}, data)
+    with pytest.raises(IdentificationError, match="unknown"):
+        OscillatorStructure(2).simulate({"m9": 1.0}, data)
+
+
+@pytest.mark.parametrize("masses", [2, 3])
+def test_recovers_parameters_within_confidence_intervals(masses):
+    rng = np.random.default_rng(10 + masses)
+    t, eta, p = make_inputs(masses, 40.0)
+    truth = true_parameters(masses, False)
+    structure = OscillatorStructure(masses, False)
+    clean = structure.simulate(truth, data_for(t, eta, p, np.zeros((len(t), 2)), ("F_c", "y_cb")))
+    noise_std = 0.01 * np.std(clean, axis=0)
+    noisy = clean + noise_std * rng.standard_normal(clean.shape)
+    data = data_for(t, eta, p, noisy, ("F_c", "y_cb"))
+    factors = np.exp(rng.uniform(-0.2, 0.2, 3 * masses))  # start 20 % off the truth
+    names = [f"{s}{i + 1}" for s in "mkc" for i in range(masses)]
+    start = {n: truth[n] * f for n, f in zip(names, factors)}
+    result = identifier({2: "two-mass", 3: "three-mass"}[masses]).identify(
+        data, initial=start, fixed={"y_0": truth["y_0"]})
+    assert result.success, result.message
+    assert set(result.free) == set(names) | {"p_gain", "F_0", "y_cb_offset"}
+    for name in result.free:
+        # within the 95 % interval, with slack to 3.5 sigma for the 9-12 parameters tested at once
+        sigma = result.std[name]
+        assert 0 < sigma < 0.2 * max(abs(truth[name]), 1e-3), (name, sigma)
+        assert abs(result.parameters[name] - truth[name]) < 3.5 * sigma, \
+            (name, result.parameters[name], truth[name], sigma)
+    floor = 100 * (1 - noise_std / np.std(clean, axis=0))
+    for j, name in enumerate(("F_c", "y_cb")):
+        assert result.fit[name] > floor[j] - 0.5
+
+
+def test_friction_structure_recovers_friction():
+    rng = np.random.default_rng(7)
+    t, eta, p = make_inputs(5, 12.0)
+    truth = true_parameters(2, True)
+    structure = OscillatorStructure(2, True)
+    clean = structure.simulate(truth, data_for(t, eta, p, np.zeros((len(t), 2)), ("F_c", "y_cb")))
+    noise_std = 0.01 * np.std(clean, axis=0)
+    data = data_for(t, eta, p, clean + noise_std * rng.standard_normal(clean.shape), ("F_c", "y_cb"))
+    free = ("F_f1", "F_f2", "c1", "c2", "p_gain", "F_0", "y_cb_offset")
+    result = identify_oscillator(data, masses=2, friction=True, free=free, fixed={"y_0": truth["y_0"]},
+                                 initial={"F_f1": 2.0, "F_f2": 2.0, "c1": 120.0, "c2": 120.0})
+    assert result.success, result.message
+    for name in free:
+        assert abs(result.parameters[name] - truth[name]) < 3.5 * result.std[name], name
+
+
+def test_identifiers_registered():
+    for name in ("two-mass", "two-mass-friction", "three-mass", "three-mass-friction"):
+        assert identifier(name).in_comparison
