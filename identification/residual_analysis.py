@@ -183,6 +183,8 @@ class ErrorModel(_Serialisable):
 
     ``radius`` is ``sqrt(chi2_2(1 - alpha) lambda_max(cov[Re G_e, Im G_e]))``: outside it (``|G_e| >
     radius``) ``G_e`` differs from zero at that frequency, i.e. the nominal model is falsified.
+    Only frequencies where the input carries power (``excited``: within 40 dB of its peak) can be
+    falsified: beyond the excited band the estimate is an extrapolation.
     """
 
     input_names: tuple[str, ...]
@@ -193,6 +195,7 @@ class ErrorModel(_Serialisable):
     radius: np.ndarray = field(repr=False)
     falsified: np.ndarray = field(repr=False)
     relative_error: np.ndarray | None = field(default=None, repr=False)
+    excited: np.ndarray | None = field(default=None, repr=False)
 
     def falsified_bands(self, index: int = 0) -> list[tuple[float, float]]:
         """Frequency intervals [Hz] where input `index`'s error model leaves its band."""
@@ -261,8 +264,23 @@ def fit_error_model(u: np.ndarray, residual: np.ndarray, sample_period: float, *
         nominal = nominal_response(frequencies) if callable(nominal_response) else nominal_response
         nominal = np.asarray(nominal, complex).reshape(response.shape)
         relative = np.abs(response) / np.maximum(np.abs(nominal), 1e-300)
+    excited = np.array([excited_band(u[:, i], sample_period, frequencies)
+                        for i in range(u.shape[1])])
     return ErrorModel(names, order_b, order_a, frequencies, response, radius,
-                      np.abs(response) > radius, relative)
+                      (np.abs(response) > radius) & excited, relative, excited)
+
+
+def excited_band(u: np.ndarray, sample_period: float, frequencies: np.ndarray, *,
+                 dynamic_range_db: float = 40.0) -> np.ndarray:
+    """Frequencies where `u` carries power within `dynamic_range_db` of its peak (Welch)."""
+    from scipy import signal as sps
+
+    x = np.asarray(u, float) - np.mean(u)
+    f, power = sps.welch(x, 1.0 / sample_period, nperseg=min(len(x), 512))
+    if not np.any(power > 0):
+        return np.zeros(len(frequencies), bool)
+    level = np.interp(frequencies, f, power)
+    return level > np.max(power) * 10 ** (-dynamic_range_db / 10)
 
 
 def _largest_variance(jac: np.ndarray, covariance: np.ndarray) -> np.ndarray:

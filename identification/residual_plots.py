@@ -69,8 +69,15 @@ def plot_error_model(model: ErrorModel, path: str | Path, *, title: str = "") ->
     f = model.frequencies
     for i, (axis, name) in enumerate(zip(axes, model.input_names)):
         magnitude = np.abs(model.response[i])
-        axis.fill_between(f, 0, model.radius[i], color="grey", alpha=0.3, label="confidence radius")
+        floor = max(float(np.min(model.radius[i])), 1e-300)
+        axis.fill_between(f, floor, model.radius[i], color="grey", alpha=0.3,
+                          label="confidence radius")
         axis.plot(f, magnitude, label=f"|G_e| from {name}")
+        axis.set_yscale("log")
+        if model.excited is not None and not np.all(model.excited[i]):
+            axis.fill_between(f, 0, 1, where=~model.excited[i], color="orange", alpha=0.12,
+                              transform=axis.get_xaxis_transform(),
+                              label="input not excited (not tested)")
         axis.plot(f[model.falsified[i]], magnitude[model.falsified[i]], "r.", markersize=3,
                   label="falsified")
         if model.relative_error is not None:

@@ -189,3 +189,20 @@ def test_analyse_residuals_is_json_ready_and_plots(tmp_path):
     assert results[0].fit < results[1].fit
     paths = residual_plots.plot_output_analysis(results[0], tmp_path / "F_c")
     assert all(Path(p).stat().st_size > 1000 for p in paths)
+
+
+def test_error_model_is_only_tested_where_the_input_carries_power():
+    from scipy import signal as sps
+
+    from identification.residual_analysis import fit_error_model
+
+    rng = np.random.default_rng(7)
+    dt = 0.02
+    b, a = sps.butter(6, 5.0, fs=1 / dt)  # input band-limited to about 5 Hz
+    u = sps.lfilter(b, a, rng.normal(size=6000))
+    residual = 0.3 * np.roll(u, 2) + 0.01 * rng.normal(size=6000)  # a real error inside the band
+    model = fit_error_model(u, residual, dt, order_b=10, order_a=0)
+    f = model.frequencies
+    assert np.all(model.excited[0][f < 3.0]) and not np.any(model.excited[0][f > 15.0])
+    assert np.any(model.falsified[0][f < 3.0])  # the in-band error is found
+    assert not np.any(model.falsified[0][f > 15.0])  # nothing claimed where nothing was excited
