@@ -26,9 +26,19 @@ solver; started in static equilibrium at the first input sample) through one reu
 :class:`build_fmu.simulate.FmuSimulator` per process; besides Table 4.1 it can free the extension
 parameters ``T_f``, ``kappa_p`` and ``k_c3`` (hinge friction, angle-dependent bellow, stiffening
 head suspension).
+
+Both take the measurement's latency into account with the parameter ``eta_delay`` [s], how late
+the measured slider height is: ``eta_measured(t) = eta(t - eta_delay)``, so the model receives
+``eta_measured(t + eta_delay)`` (a band-limited fractional shift of the input samples,
+:func:`identification.data.delay_signal`, before the simulation; the last samples read the held
+end value). The rig's drive reports the position about 5 ms late (:mod:`identification.data`);
+a negative value would mean the measurement leads. It is fixed (default 0, or the ``eta_delay``
+option, or ``fixed={"eta_delay": ...}``) unless named among the free parameters, and it does not
+go to the model's parameter file.
 """
 from __future__ import annotations
 
+import math
 from functools import lru_cache
 from typing import Any, Callable, Mapping, Sequence
 
@@ -36,6 +46,7 @@ import numpy as np
 
 from identification.base import (IdentificationData, IdentificationError, IdentificationResult,
                                  Identifier, ModelStructure, register_identifier)
+from identification.data import delay_signal
 from identification.linearisation import (INDEX as _INDEX, discretise, linearise,
                                           parameter_defaults as _parameter_defaults, propagate,
                                           solve_equilibrium, static_functions)
@@ -44,6 +55,8 @@ from identification.linearisation import (INDEX as _INDEX, discretise, linearise
 TABLE_4_1 = ("m1", "m2", "m3", "m4", "m_c", "c1", "c2", "c3", "c_c", "k", "k_c", "k_ph", "k_p")
 #: Extension parameters the nonlinear structure may free (diagnosis candidates).
 EXTENSIONS = ("T_f", "kappa_p", "k_c3")
+#: Input delay of the measured eta [s] (module notes); a structure parameter, not a model one.
+DELAY = "eta_delay"
 #: Carbon-contact stiffness of EN 50318 [N/m] (thesis section 4.5).
 EN50318_CONTACT_STIFFNESS = 50000.0
 INPUT_NAMES = ("eta", "p")
@@ -58,6 +71,7 @@ BOUNDS: dict[str, tuple[float, float]] = {
     "c1": (1.0, 1e5), "c2": (1.0, 1e6), "c3": (1.0, 1e5), "c_c": (0.1, 1e4),
     "k": (1e3, 1e9), "k_c": (100.0, 1e6), "k_ph": (100.0, 1e7), "k_p": (10.0, 5000.0),
     "T_f": (0.0, 500.0), "kappa_p": (-5.0, 5.0), "k_c3": (-1e9, 1e9),
+    DELAY: (-0.02, 0.1),
 }
 
 
@@ -71,12 +85,18 @@ class _PhysicalBase(ModelStructure):
 
     def __init__(self, *, outputs: Sequence[str] = DEFAULT_OUTPUTS,
                  fixed: Mapping[str, float] | None = None,
-                 contact_stiffness: float | None = None) -> None:
+                 contact_stiffness: float | None = None, eta_delay: float = 0.0) -> None:
         unknown = [o for o in outputs if o not in OUTPUT_NAMES]
         if unknown or not outputs:
             raise IdentificationError(f"{self.name}: outputs {list(outputs)}: choose from "
                                       f"{OUTPUT_NAMES}")
         fixed = dict(fixed or {})
+        delay = float(fixed.pop(DELAY, eta_delay))
+        low, high = BOUNDS[DELAY]
+        if not low <= delay <= high:
+            raise IdentificationError(f"{self.name}: eta_delay = {delay!r} s lies outside "
+                                      f"[{low:g}, {high:g}] s")
+        self.eta_delay = delay
         if contact_stiffness is not None:
             fixed["k_ph"] = float(contact_stiffness)
         names = _parameter_defaults()[0]
@@ -93,16 +113,16 @@ class _PhysicalBase(ModelStructure):
             raise IdentificationError(f"{self.name}: fixed values: {error}") from None
         self.output_names = tuple(outputs)
         self.fixed = {k: float(v) for k, v in fixed.items()}
-        self.parameter_names = TABLE_4_1 + self.extensions
+        self.parameter_names = TABLE_4_1 + self.extensions + (DELAY,)
 
     def default_free(self) -> tuple[str, ...]:
         """Table 4.1's 13 parameters, less those given in ``fixed``."""
         return tuple(n for n in TABLE_4_1 if n not in self.fixed)
 
     def nominal(self) -> dict[str, float]:
-        """Table 4.1 (the model defaults), overridden by ``fixed``."""
+        """Table 4.1 (the model defaults), overridden by ``fixed``; ``eta_delay``."""
         names, vector = _parameter_defaults()
-        values = dict(zip(names, vector.tolist())) | self.fixed
+        values = dict(zip(names, vector.tolist())) | self.fixed | {DELAY: self.eta_delay}
         return {n: values[n] for n in self.parameter_names}
 
     def bounds(self) -> dict[str, tuple[float, float]]:
@@ -110,7 +130,9 @@ class _PhysicalBase(ModelStructure):
         return {n: BOUNDS[n] for n in self.parameter_names}
 
     def parameter_vector(self, parameters: Mapping[str, float]) -> np.ndarray:
-        """The model's full parameter vector: defaults, ``fixed``, then `parameters`."""
+        """The model's full parameter vector: defaults, ``fixed``, then `parameters` (whose
+        ``eta_delay``, not a model parameter, is ignored here)."""
+        parameters = {k: v for k, v in parameters.items() if k != DELAY}
         unknown = sorted(set(parameters) - set(self.parameter_names))
         if unknown:
             raise IdentificationError(f"{self.name}: unknown parameter(s) {unknown}; known: "
@@ -131,6 +153,17 @@ class _PhysicalBase(ModelStructure):
     def _rows(self) -> list[int]:
         return [OUTPUT_NAMES.index(o) for o in self.output_names]
 
+    def model_inputs(self, parameters: Mapping[str, float], data: IdentificationData
+                     ) -> np.ndarray:
+        """Columns ``(eta, p)`` the model receives: eta advanced by ``eta_delay`` (module notes)."""
+        u = np.column_stack([data.input(n) for n in INPUT_NAMES])
+        delay = float(parameters.get(DELAY, self.eta_delay))
+        if not math.isfinite(delay):
+            raise IdentificationError(f"{self.name}: eta_delay = {delay!r}")
+        if delay != 0.0:
+            u[:, 0] = delay_signal(u[:, 0], -delay / data.sample_period)
+        return u
+
 
 class PhysicalLinear(_PhysicalBase):
     """The physical model linearised about its equilibrium for every candidate (thesis 4.1.3).
@@ -147,6 +180,9 @@ class PhysicalLinear(_PhysicalBase):
         Inputs linearised about: their mean over the data, or the first sample.
     hold : {"foh", "zoh"}
         Inputs linear between samples (default, as the FMUs) or held.
+    eta_delay : float
+        How late the measured eta is [s] (module notes): the nominal value of the parameter
+        ``eta_delay`` (fixed unless freed).
     """
 
     name = "physical-linear"
@@ -155,8 +191,9 @@ class PhysicalLinear(_PhysicalBase):
 
     def __init__(self, *, outputs: Sequence[str] = DEFAULT_OUTPUTS,
                  fixed: Mapping[str, float] | None = None, contact_stiffness: float | None = None,
-                 operating_point: str = "mean", hold: str = "foh") -> None:
-        super().__init__(outputs=outputs, fixed=fixed, contact_stiffness=contact_stiffness)
+                 operating_point: str = "mean", hold: str = "foh", eta_delay: float = 0.0) -> None:
+        super().__init__(outputs=outputs, fixed=fixed, contact_stiffness=contact_stiffness,
+                         eta_delay=eta_delay)
         if operating_point not in ("mean", "first"):
             raise IdentificationError(f"operating_point {operating_point!r}: 'mean' or 'first'")
         if hold not in ("foh", "zoh"):
@@ -171,7 +208,7 @@ class PhysicalLinear(_PhysicalBase):
 
     def simulate(self, parameters: Mapping[str, float], data: IdentificationData) -> np.ndarray:
         """Free run of the linearised model on `data`'s inputs (module notes)."""
-        u = np.column_stack([data.input(n) for n in INPUT_NAMES])
+        u = self.model_inputs(parameters, data)
         u0 = u.mean(axis=0) if self.operating_point == "mean" else u[0]
         a, b, c, d, _, y0 = self.linear_model(parameters, u0)
         du = u - u0
@@ -206,6 +243,8 @@ class PhysicalNonlinear(_PhysicalBase):
         A Pantograph FMU (default: :func:`build_fmu.project.project_fmu`, built if needed).
     solver_tolerance : float, optional
         The FMU's solver tolerance (default: the FMU's).
+    eta_delay : float
+        As :class:`PhysicalLinear`.
 
     Notes
     -----
@@ -221,8 +260,10 @@ class PhysicalNonlinear(_PhysicalBase):
 
     def __init__(self, *, outputs: Sequence[str] = DEFAULT_OUTPUTS,
                  fixed: Mapping[str, float] | None = None, contact_stiffness: float | None = None,
-                 fmu_path: str | None = None, solver_tolerance: float | None = None) -> None:
-        super().__init__(outputs=outputs, fixed=fixed, contact_stiffness=contact_stiffness)
+                 fmu_path: str | None = None, solver_tolerance: float | None = None,
+                 eta_delay: float = 0.0) -> None:
+        super().__init__(outputs=outputs, fixed=fixed, contact_stiffness=contact_stiffness,
+                         eta_delay=eta_delay)
         if fmu_path is None:
             from build_fmu.project import project_fmu
 
@@ -235,11 +276,13 @@ class PhysicalNonlinear(_PhysicalBase):
         from build_fmu.simulate import SimulationError
 
         vector = self.parameter_vector(parameters)
-        values = {n: float(vector[_INDEX[n]]) for n in self.parameter_names} | self.fixed
+        values = {n: float(vector[_INDEX[n]]) for n in self.parameter_names
+                  if n != DELAY} | self.fixed
         simulator = _simulator(self.fmu_path)
+        u = self.model_inputs(parameters, data)
         try:
             response = simulator.simulate(
-                data.time, {n: data.input(n) for n in INPUT_NAMES}, parameters=values,
+                data.time, {n: u[:, i] for i, n in enumerate(INPUT_NAMES)}, parameters=values,
                 solver_tolerance=self.solver_tolerance)
         except SimulationError as error:
             raise IdentificationError(f"{self.name}: the FMU failed for {dict(parameters)}: "
@@ -319,6 +362,6 @@ register_identifier(Identifier(
     "physical", "nonlinear physical model (Table 4.1), the Pantograph FMU in the loop",
     identify_nonlinear))
 
-__all__ = ["PhysicalLinear", "PhysicalNonlinear", "TABLE_4_1", "EXTENSIONS", "BOUNDS",
+__all__ = ["PhysicalLinear", "PhysicalNonlinear", "TABLE_4_1", "EXTENSIONS", "DELAY", "BOUNDS",
            "EN50318_CONTACT_STIFFNESS", "identify_linear", "identify_nonlinear", "linearise",
            "solve_equilibrium", "static_functions"]

@@ -47,7 +47,8 @@ def run_identify(args: argparse.Namespace) -> int:
 
     def load(path: str):
         return pantograph_data(path, rate=args.rate, eta_offset=args.eta_offset, start=args.start,
-                               stop=args.stop, cross_bar=args.cross_bar)
+                               stop=args.stop, cross_bar=args.cross_bar,
+                               position_latency=args.position_latency)
 
     data = load(args.dataset)
     validation = load(args.validate) if args.validate else None
@@ -133,3 +134,7 @@ def register(add: Callable[..., argparse.ArgumentParser]) -> None:
     p.add_argument("--eta-offset", type=float, help="height of the motor's zero [m] (default "
                    "from the run's metadata)")
     p.add_argument("--cross-bar", default="laser", choices=("laser", "video"))
+    p.add_argument("--position-latency", type=float,
+                   help="how late the drive reports the slider position [s] (default: the run's "
+                        "recorded rig set-up, else 0); physical structures also take "
+                        "--fix eta_delay=SECONDS or --free ... eta_delay")

@@ -56,8 +56,10 @@ def run_rig_run(args: argparse.Namespace) -> int:
         profile = replace(profile, duration=args.duration)
     folder = Path(args.folder) if args.folder else new_run_folder(args.out)
     options = RunOptions(formats=tuple(args.formats), notes=args.notes or "",
-                         rig_setup={} if args.motor_zero_height is None
-                         else {"motor_zero_height": args.motor_zero_height})
+                         rig_setup={key: value for key, value in
+                                    (("motor_zero_height", args.motor_zero_height),
+                                     ("position_latency", args.position_latency))
+                                    if value is not None})
     if args.interface:
         result = _run_on_rig(args, profile, folder, options)
     elif args.realtime:
@@ -164,6 +166,9 @@ def register(add: Callable) -> None:
     p.add_argument("--motor-zero-height", type=float,
                    help="height [m] of the bar at slider position 0, recorded in the run's "
                         "metadata for identification (virtual test bed: its own, 2.0 m)")
+    p.add_argument("--position-latency", type=float,
+                   help="how late the drive's reported slider position is [s], recorded for "
+                        "identification (virtual test bed: 0.005)")
     p.add_argument("--io", help="MODULE:FACTORY returning the real rig's analogue I/O")
 
     p = sub.add_parser("emulate", help="serve the emulated drive and plant on a CAN bus")

@@ -72,7 +72,7 @@ from rig.drive import LinearMotorDriver, open_bus
 from rig.drive_emulator import DriveEmulator, DriveParameters
 from rig.imperfections import RigImperfections
 from rig.profiles import Profile, ProfileStream
-from rig.virtual import TRUTH_FILE, plain_drive_parameters
+from rig.virtual import POSITION_LATENCY, TRUTH_FILE, plain_drive_parameters
 from rig.session import RunOptions, RunResult, run_profile
 from rig.testbed import PlantSample, VirtualTestBed
 
@@ -363,6 +363,7 @@ def run_virtual_profile_realtime(profile: Profile, *, fmu_path: str | Path, fold
                                       "reply_timeout_cycles": settings.reply_timeout_cycles}}
                 run_options = replace(options or RunOptions(), source="emulator", truth=truth,
                                       rig_setup={"motor_zero_height": plant.bed.motor_zero_height,
+                                                 "position_latency": POSITION_LATENCY,
                                                  **dict((options or RunOptions()).rig_setup)})
                 _warm_up(profile)
                 result = run_profile(profile, driver=driver, io=plant,

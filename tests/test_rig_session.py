@@ -57,6 +57,7 @@ def test_an_aprbs_run_completes_and_records_what_the_rig_did(pantograph_fmu, tmp
     assert metadata["profile"]["name"] == "test"
     # The set-up the identification needs (eta = motor_zero_height + slider) is a known fact.
     assert metadata["extra"]["rig_setup"]["motor_zero_height"] == 2.0
+    assert metadata["extra"]["rig_setup"]["position_latency"] == pytest.approx(0.005)
 
 
 def test_a_step_the_limiter_would_catch_trips_the_drive_and_the_run_stops_safely(
