@@ -16,7 +16,8 @@
 from __future__ import annotations
 
 import json
-from dataclasses import replace
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -197,3 +198,190 @@ def plot_design(design: PantographDesign, folder: str | Path) -> dict[str, Path]
     plt.close(fig)
     return {"inputs_plot": inputs, "std_plot": std}
 
+
+
+# --- proof on the virtual test bed -----------------------------------------------------------
+
+
+def sensor_noise_only():
+    """:class:`rig.imperfections.RigImperfections` with every effect off except the sensors'
+    white noise (force and lasers at the rig's magnitudes), so that a comparison of two inputs
+    on the virtual test bed is about information, not about model errors."""
+    from rig.imperfections import RigImperfections
+
+    rig = RigImperfections()
+    return replace(RigImperfections.none(), force_noise=rig.force_noise,
+                   laser_noise=rig.laser_noise)
+
+
+@dataclass(frozen=True)
+class RunEstimate:
+    """Least-squares estimates of the free parameters from one virtual rig run.
+
+    Parameters
+    ----------
+    name : str
+        ``"designed"`` or ``"conventional"``.
+    folder : pathlib.Path
+        The recorded run.
+    estimates, std : mapping
+        Estimate and reported standard deviation per free parameter.
+    covariance : ndarray, shape (n_free, n_free)
+        Reported covariance :math:`\\hat\\sigma^2 (J^T J)^{-1}` (physical units).
+    truth : mapping
+        The plant's value per free parameter.
+    within : mapping
+        Whether the truth lies in the estimate's 95 % interval (:math:`\\pm 1.96\\,\\sigma`).
+    fit, residual_std : mapping
+        Fit [%] and residual standard deviation per output.
+    """
+
+    name: str
+    folder: Path
+    estimates: dict[str, float]
+    std: dict[str, float]
+    covariance: np.ndarray
+    truth: dict[str, float]
+    within: dict[str, bool]
+    fit: dict[str, float]
+    residual_std: dict[str, float]
+
+
+def identify_run(name: str, folder: Path, structure, free: Sequence[str],
+                 initial: Mapping[str, float], truth: Mapping[str, float], *,
+                 position_latency: float | None = 0.005) -> RunEstimate:
+    """Fit `free` of `structure` to the run in `folder` (50 Hz, outputs F_c and y_cb) by
+    :func:`identification.least_squares.fit_least_squares` from `initial`."""
+    from identification.data import pantograph_data
+    from identification.least_squares import fit_least_squares
+
+    data = pantograph_data(folder, outputs=("F_c", "y_cb"), position_latency=position_latency)
+    result = fit_least_squares(structure, data, free=free, initial=initial)
+    std = {n: float(result.std[n]) for n in free}
+    estimates = {n: float(result.parameters[n]) for n in free}
+    within = {n: bool(abs(estimates[n] - truth[n]) <= 1.96 * std[n]) for n in free}
+    return RunEstimate(name, Path(folder), estimates, std, np.asarray(result.covariance),
+                       {n: float(truth[n]) for n in free}, within, dict(result.fit),
+                       {k: float(v) for k, v in result.details["residual_std"].items()})
+
+
+@dataclass(frozen=True)
+class VirtualComparison:
+    """Designed vs conventional input, each run on the virtual test bed and identified.
+
+    ``det_ratio_per_parameter`` is :math:`(\\det C_\\mathrm{conv} / \\det C_\\mathrm{des})^{1/n}`
+    of the *reported* covariances (> 1: the designed run is more informative), ``std_ratio``
+    the conventional over the designed standard deviation per parameter.
+    """
+
+    structure: str
+    free: tuple[str, ...]
+    duration: float
+    designed: RunEstimate
+    conventional: RunEstimate
+    predicted_det_ratio_per_parameter: float
+
+    @property
+    def det_ratio_per_parameter(self) -> float:
+        _, designed = np.linalg.slogdet(self.designed.covariance)
+        _, conventional = np.linalg.slogdet(self.conventional.covariance)
+        return float(np.exp((conventional - designed) / len(self.free)))
+
+    @property
+    def std_ratio(self) -> dict[str, float]:
+        return {n: self.conventional.std[n] / self.designed.std[n] for n in self.free}
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready summary."""
+        runs = {r.name: {"estimates": r.estimates, "std": r.std, "truth": r.truth,
+                         "within_95": r.within, "fit_percent": r.fit,
+                         "residual_std": r.residual_std, "folder": str(r.folder)}
+                for r in (self.designed, self.conventional)}
+        return {"structure": self.structure, "free": list(self.free), "duration_s": self.duration,
+                "det_ratio_per_parameter": self.det_ratio_per_parameter,
+                "predicted_det_ratio_per_parameter": self.predicted_det_ratio_per_parameter,
+                "std_ratio_conventional_to_designed": self.std_ratio, "runs": runs}
+
+    def markdown(self) -> str:
+        """A table per parameter: truth, estimates +- std (designed, APRBS), std ratio."""
+        d, c = self.designed, self.conventional
+        lines = [f"{self.structure}, {self.duration:g} s each, free {list(self.free)}", "",
+                 "| parameter | truth | designed | APRBS | std ratio APRBS/designed |",
+                 "|---|---|---|---|---|"]
+        for n in self.free:
+            lines.append(f"| {n} | {d.truth[n]:.5g} | {d.estimates[n]:.5g} +- {d.std[n]:.3g}"
+                         f"{'' if d.within[n] else ' (truth outside 95 %)'} | "
+                         f"{c.estimates[n]:.5g} +- {c.std[n]:.3g}"
+                         f"{'' if c.within[n] else ' (truth outside 95 %)'} | "
+                         f"{self.std_ratio[n]:.2f} |")
+        lines += ["", f"Reported covariance, det ratio per parameter APRBS/designed: "
+                  f"{self.det_ratio_per_parameter:.2f} (predicted by the design: "
+                  f"{self.predicted_det_ratio_per_parameter:.2f}).",
+                  f"Fit [%] designed {_rounded(d.fit)}, APRBS {_rounded(c.fit)}; residual std "
+                  f"designed {_rounded(d.residual_std, 4)}, APRBS {_rounded(c.residual_std, 4)}."]
+        return "\n".join(lines) + "\n"
+
+
+def _rounded(values: Mapping[str, float], digits: int = 2) -> dict[str, float]:
+    return {k: round(float(v), digits) if abs(v) >= 1e-2 else float(f"{v:.3g}")
+            for k, v in values.items()}
+
+
+def compare_on_virtual_rig(design: PantographDesign, folder: str | Path, *, fmu_path=None,
+                           imperfections=None, seed: int = 0,
+                           position_latency: float | None = 0.005, start_factor: float = 1.1,
+                           progress: Callable[[str], None] | None = None) -> VirtualComparison:
+    """Run the designed input and the APRBS profile of equal length on the virtual test bed and
+    identify the design's free parameters from each (issue 7: "run on the virtual test bed it
+    gives tighter parameter estimates than the APRBS run of equal length").
+
+    The plant is the Pantograph FMU at ``design.parameters`` (for ``physical-linear``: its
+    linearisation is the design's model), with :func:`sensor_noise_only` unless
+    `imperfections` is given. Both runs are fitted with the design's structure
+    (:meth:`LinearisedPantograph.structure_for`) from the design's parameter values, at 50 Hz,
+    the motor position advanced by `position_latency` (the drive's report latency), starting
+    from the true values times `start_factor`.
+    """
+    from identification.pantograph_sensitivity import LinearisedPantograph
+    from rig.profiles import load_profile
+    from rig.virtual import run_virtual_profile
+
+    if design.structure != "physical-linear":
+        raise ValueError(f"compare_on_virtual_rig needs a 'physical-linear' design (the plant is "
+                         f"the pantograph FMU, whose parameters are the truth), got "
+                         f"{design.structure!r}")
+    if fmu_path is None:
+        from build_fmu.project import project_fmu
+
+        fmu_path = project_fmu("Pantograph")
+    folder = Path(folder)
+    duration = round(len(design.time) * design.constraints.sample_period, 9)
+    profile, _ = write_design_profile(design.motor_position, design.pressure_demand,
+                                      design.constraints, folder, name="designed")
+    profiles = {"designed": load_profile(profile),
+                "conventional": replace(load_profile(profile_path("aprbs_training")),
+                                        duration=duration)}
+    structure = LinearisedPantograph.structure_for(design.structure)
+    plant = {k: v for k, v in design.parameters.items() if k in _fmu_parameter_names()}
+    truth = dict(design.parameters)
+    initial = truth | {n: start_factor * truth[n] for n in design.parameter_names}
+    runs = {}
+    for name, rig_profile in profiles.items():
+        if progress:
+            progress(f"virtual test bed: running the {name} input ({duration:g} s)")
+        run_virtual_profile(rig_profile, fmu_path=fmu_path, folder=folder / name,
+                            imperfections=imperfections or sensor_noise_only(),
+                            parameters=plant, seed=seed)
+        if progress:
+            progress(f"identifying {list(design.parameter_names)} from the {name} run")
+        runs[name] = identify_run(name, folder / name, structure, design.parameter_names,
+                                  initial, truth, position_latency=position_latency)
+    return VirtualComparison(design.structure, design.parameter_names, duration,
+                             runs["designed"], runs["conventional"],
+                             float(design.summary()["det_ratio_per_parameter"]))
+
+
+def _fmu_parameter_names() -> set[str]:
+    from fmu_src.models import default_parameters
+
+    return set(default_parameters("Pantograph").names)
