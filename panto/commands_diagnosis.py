@@ -191,8 +191,27 @@ def run_diagnose(args: argparse.Namespace) -> int:
     return 0
 
 
+def run_benchmark(args: argparse.Namespace) -> int:
+    """Draw the cases, diagnose them blind in parallel, score, write JSON + markdown + PNG."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    from identification.diagnosis_benchmark import run_diagnosis_benchmark
+    from identification.diagnosis_benchmark_report import write_benchmark
+
+    if args.cases < 1 or args.workers < 1 or args.duration <= 2.0:
+        raise ValueError(f"--cases {args.cases}, --workers {args.workers}, --duration "
+                         f"{args.duration}: need cases >= 1, workers >= 1, duration > 2 s")
+    with ProcessPoolExecutor(max_workers=args.workers) as pool:
+        result = run_diagnosis_benchmark(args.cases, args.seed, executor=pool, progress=_say,
+                                         duration=args.duration, structure=args.model)
+    target = Path(args.json) if args.json else Path(args.out) / "diagnosis_benchmark.json"
+    paths = write_benchmark(result, target)
+    _say(f"wrote {paths['json']}, {paths['markdown']} and {paths['png']}")
+    return 0
+
+
 def register(add: Callable) -> None:
-    """Declare ``diagnose`` with ``add(name, handler, help)``."""
+    """Declare ``diagnose`` and ``diagnose-benchmark`` with ``add(name, handler, help)``."""
     p = add("diagnose", run_diagnose, "sim-to-real gap diagnosis: where the model misses, which "
             "unmodelled effect causes it, how far adding it closes the gap on withheld data")
     p.add_argument("--train", required=True, help="training run (folder, .csv, .parquet, .mat)")
@@ -215,3 +234,13 @@ def register(add: Callable) -> None:
     p.add_argument("--folds", type=int, default=4)
     p.add_argument("--out", help="folder for report.html, report.json and the plots")
     p.add_argument("--json", help="also write the JSON summary here")
+
+    b = add("diagnose-benchmark", run_benchmark, "blind benchmark of the diagnosis on the virtual "
+            "test bed: hidden effects of random magnitude, confusion matrix and scores")
+    b.add_argument("--cases", type=int, required=True, help="number of cases drawn")
+    b.add_argument("--seed", type=int, default=0, help="seed of the draw")
+    b.add_argument("--workers", type=int, default=2, help="processes running the cases")
+    b.add_argument("--duration", type=float, default=25.0, help="length of each run [s]")
+    b.add_argument("--model", default="physical-linear", help="nominal structure")
+    b.add_argument("--out", default=".", help="folder for diagnosis_benchmark.json/.md/.png")
+    b.add_argument("--json", help="JSON path (the .md and _confusion.png go beside it)")
