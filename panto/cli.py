@@ -99,7 +99,8 @@ def _parser() -> tuple[argparse.ArgumentParser, dict[str, Callable]]:
     p.add_argument("--model", default="Pantograph", choices=("Pantograph", "TwoMass", "ThreeMass"))
     p.add_argument("--out", required=True, help="JSON file to write")
 
-    p = add("demo", run_demo, "the main job: build the FMUs and simulate a rig run")
+    p = add("demo", run_demo, "the main job: FMUs, rig campaign, video, identification, "
+            "diagnosis, next experiment, co-simulation; writes report.html and summary.json")
     p.add_argument("--out", default="out", help="output folder (default: out)")
     p.add_argument("--quick", action="store_true", help="reduced version (seconds)")
 

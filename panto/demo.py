@@ -1,143 +1,245 @@
-"""The main job (``panto demo``), as far as the product goes today.
+"""The main job (``panto demo``): the whole story on the embedded defaults, into one folder.
 
-1. Generate, compile, package and validate the FMUs (FMI 2.0 and 3.0, ME and CS).
-2. Run the thesis' rig campaign on the virtual test bed: an APRBS training run and a ramp
-   validation run, through the CAN driver and the drive emulator, with the rig's imperfections
-   on; the datasets (CSV, Parquet, MAT) go to ``runs/``.
-3. Simulate the nominal nonlinear and linearised FMUs on each run's measured inputs and plot them
-   against the measured force and cross-bar position (the sim-to-real gap before any fitting).
+1. Generate, compile, package and validate the FMUs (FMI 2.0 and 3.0, ME and CS) -> ``fmus/``.
+2. Run the thesis' rig campaign on the virtual test bed (an APRBS training run and a ramp
+   validation run, through the CAN driver and the drive emulator, imperfections on) ->
+   ``runs/<label>_NNNN``; simulate the nominal FMUs on the measured inputs (the gap before any
+   fitting); film a window of each run with the synthetic camera (reduced resolution), track the
+   markers, synchronise the track with the 500 Hz data through the LED and write the merged
+   dataset beside the run (``runs/<label>_NNNN/video_merged/run.csv``) -> ``video/``.
+3. Identify the physical model (physical-linear, Levenberg-Marquardt) and the other fast
+   structures on the training run, validate on the ramp run: the comparison table
+   (thesis 4.8) -> ``comparison/``; the physical model's parameter file, an NSGA-II Pareto front
+   (Fig. 4.7) and the eigenvalue sensitivity (Fig. 4.9) -> ``identification/``.
+4. Diagnose the physical model's sim-to-real gap on the withheld validation run -> ``diagnosis/``.
+5. Design the next rig run (D-optimal, covariance against the APRBS) -> ``doe/``.
+6. Co-simulate the identified pantograph (its parameter file applied to ``Pantograph.fmu``) with
+   the EN 50318 catenary at 300 km/h and set the statistics beside the targets -> ``cosim/``.
 
-The rig, identification, diagnosis, design-of-experiments and catenary steps of the full story
-(issue 9) join here as those parts land.
+Everything ends in ``summary.json`` and ``report.html`` (:mod:`panto.report`). A step that fails
+is recorded with its message (and the steps needing its results are marked skipped); the others
+still run, and :func:`run_demo` raises :class:`DemoError` at the end, after writing both files.
 """
 from __future__ import annotations
 
 import json
+import re
 import time
+import traceback
+from collections.abc import Callable, Mapping
+from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Callable
+from typing import Any
 
-import numpy as np
+Progress = Callable[[str], None]
 
-def _fit_percent(measured: np.ndarray, simulated: np.ndarray) -> float:
-    """Fit % = 100 (1 - ||y - y_hat|| / ||y - mean(y)||) (thesis section 4.1.3)."""
-    return float(100 * (1 - np.linalg.norm(measured - simulated)
-                        / np.linalg.norm(measured - measured.mean())))
+#: The structures the comparison fits in the full demo: the fast ones (seconds each on the
+#: 180 s run). The FMU-in-the-loop ``physical`` and the friction oscillators take 1-5 minutes
+#: each; their figures on the same runs are in docs/identification/comparison_full.md.
+FAST_STRUCTURES = ("physical-linear", "two-mass", "three-mass", "blackbox-4", "blackbox-6")
 
 
-def run_demo(out: Path, *, quick: bool = False, progress: Callable[[str], None] = print) -> dict:
-    """Run the main job and write its results to ``out``; returns the summary."""
-    from build_fmu.project import build_project_fmus
-    from fmu_src.models import Model
+class DemoError(RuntimeError):
+    """Raised at the end of :func:`run_demo` when a step failed (everything else was written)."""
 
-    started = time.perf_counter()
+
+@dataclass(frozen=True)
+class DemoSettings:
+    """How much the demo does (:meth:`full` or :meth:`quick`).
+
+    Parameters
+    ----------
+    run_duration : float or None
+        Length of each rig run [s] (None: the profile's, 180 s and 200 s).
+    fmu_names : tuple of str or None
+        FMUs to build (None: all).
+    fmi_versions : tuple of int
+        FMI versions to build.
+    video_window : float
+        Seconds of each run filmed by the synthetic camera.
+    video_scale : float
+        Camera resolution factor (1: 1920x1080).
+    structures : tuple of str
+        Structures of the comparison table.
+    max_evaluations : int or None
+        Model evaluations per least-squares fit (None: the estimators' defaults).
+    pareto_population, pareto_generations : int
+        NSGA-II for the Pareto front (thesis Fig. 4.7); population 0: no front.
+    diagnosis_max_effects : int
+        Effects the diagnosis may accept.
+    doe_duration : float
+        Length of the designed rig run [s].
+    doe_population, doe_generations : int
+        GA of the experiment design.
+    cosim_element_length, cosim_time_step : float or None
+        Catenary discretisation (None: the line's defaults).
+    cosim_speed : float
+        Running speed [km/h].
+    cosim_reference : bool
+        Also run the EN 50318 reference pantograph (the line model's check).
+    """
+
+    run_duration: float | None = None
+    fmu_names: tuple[str, ...] | None = None
+    fmi_versions: tuple[int, ...] = (2, 3)
+    video_window: float = 30.0
+    video_scale: float = 0.5
+    structures: tuple[str, ...] = FAST_STRUCTURES
+    max_evaluations: int | None = None
+    pareto_population: int = 24
+    pareto_generations: int = 12
+    diagnosis_max_effects: int = 2
+    doe_duration: float = 60.0
+    doe_population: int = 20
+    doe_generations: int = 20
+    cosim_element_length: float | None = None
+    cosim_time_step: float | None = None
+    cosim_speed: float = 300.0
+    cosim_reference: bool = True
+
+    @classmethod
+    def full(cls) -> DemoSettings:
+        """The main job: the thesis' runs in full, fast structures, a small GA."""
+        return cls()
+
+    @classmethod
+    def quick(cls) -> DemoSettings:
+        """Every step on short runs, a tiny video and GA, a coarse catenary (seconds each)."""
+        return cls(run_duration=10.0, fmu_names=("Pantograph", "PantographLinear"),
+                   fmi_versions=(2,), video_window=7.0, video_scale=0.25,
+                   structures=("physical-linear", "blackbox-4"), max_evaluations=300,
+                   pareto_population=8, pareto_generations=3, diagnosis_max_effects=1,
+                   doe_duration=10.0, doe_population=6, doe_generations=2,
+                   cosim_element_length=0.5, cosim_time_step=1e-3, cosim_reference=False)
+
+
+@dataclass(frozen=True)
+class Step:
+    """One step of the demo: its name, title, function and what it needs from earlier steps."""
+
+    name: str
+    title: str
+    function: Callable[..., dict]
+    needs: tuple[str, ...] = ()
+
+
+def _steps() -> tuple[Step, ...]:
+    from panto import demo_analysis as analysis
+    from panto import demo_steps as steps
+
+    return (
+        Step("fmus", "build and validate the FMUs", steps.build_fmus),
+        Step("rig", "rig campaign on the virtual test bed", steps.run_rig_campaign, ("fmus",)),
+        Step("video", "camera video: render, track, synchronise, merge", steps.film_runs,
+             ("runs",)),
+        Step("identification", "identify the physical model and compare the structures",
+             analysis.identify_models, ("runs",)),
+        Step("diagnosis", "diagnose the physical model's gap on the validation run",
+             analysis.diagnose_gap, ("data",)),
+        Step("doe", "design the next rig run", analysis.design_next_run, ()),
+        Step("cosim", "co-simulate the identified pantograph with the catenary",
+             analysis.cosimulate_identified, ("fmus",)),
+    )
+
+
+def run_demo(out: Path, *, quick: bool = False, progress: Progress = print,
+             settings: DemoSettings | None = None) -> dict:
+    """Run the main job and write its results to `out` (module notes).
+
+    Parameters
+    ----------
+    out : pathlib.Path
+        Output folder (created; a rerun adds new rig runs and overwrites the rest).
+    quick : bool
+        :meth:`DemoSettings.quick` instead of :meth:`DemoSettings.full`.
+    progress : callable
+        Receives one line per step and the steps' own progress lines.
+    settings : DemoSettings, optional
+        Overrides `quick`.
+
+    Returns
+    -------
+    dict
+        The summary also written to ``out/summary.json``.
+
+    Raises
+    ------
+    DemoError
+        After writing the summary and the report, when any step failed.
+    """
+    out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    progress(f"[1/3] building the FMUs into {out / 'fmus'}")
-    names = ("Pantograph", "PantographLinear") if quick else None
-    kwargs = {"names": names} if names else {}
-    built = build_project_fmus(out / "fmus", progress=lambda s: progress("      " + s), **kwargs)
-    invalid = [b.path.name for b in built if b.problems]
-    if invalid:
-        raise RuntimeError(f"fmpy's validator rejected {invalid}")
+    settings = settings or (DemoSettings.quick() if quick else DemoSettings.full())
+    started = time.perf_counter()
+    state: dict[str, Any] = {"out": out, "settings": settings}
+    summary: dict[str, Any] = {"quick": quick, "settings": asdict(settings), "steps": []}
+    steps = _steps()
+    for number, step in enumerate(steps, 1):
+        label = f"[{number}/{len(steps)}] {step.title}"
+        record = _run_step(step, state, label, progress)
+        summary["steps"].append(record)
+        if record["status"] == "ok":
+            summary[step.name] = record.pop("result")
+    summary["wall_time_s"] = time.perf_counter() - started
+    summary["failed_steps"] = [s["name"] for s in summary["steps"] if s["status"] != "ok"]
+    return _finish(out, summary, progress)
 
-    progress("[2/3] rig campaign on the virtual test bed (CAN driver + drive emulator, "
-             "imperfections on)")
-    runs = _rig_campaign(out, quick=quick, progress=progress)
 
-    progress("[3/3] the nominal model on the measured inputs (first look at the sim-to-real gap)")
-    gap = {}
-    for label, run in runs.items():
-        gap[label] = _nominal_against_measured(out, label, run["folder"], progress)
-    model = Model("Pantograph")
-    lin = model.linearise(2.0, 4.0)
-    summary = {
-        "fmus": [{"file": b.path.name, "fmi_version": b.fmi_version, "valid": not b.problems}
-                 for b in built],
-        "rig_runs": runs,
-        "nominal_model_fit_percent": gap,
-        "check_point_eta2_p4": {"F_c_N": float(lin.y0[2]), "phi1_deg": float(np.degrees(lin.x0[0])),
-                                "modes_hz": lin.natural_frequencies_hz.tolist()},
-        "wall_time_s": time.perf_counter() - started,
-    }
-    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=str))
+def _run_step(step: Step, state: dict[str, Any], label: str, progress: Progress) -> dict:
+    """Run one step; a failure becomes a record with its message, never an exception."""
+    missing = [key for key in step.needs if key not in state]
+    if missing:
+        message = f"skipped: needs {missing} from a step that failed"
+        progress(f"{label}: {message}")
+        return {"name": step.name, "title": step.title, "status": "skipped", "seconds": 0.0,
+                "message": message}
+    progress(label)
+    clock = time.perf_counter()
+    try:
+        result = step.function(state, lambda line: _say(progress, line))
+    except Exception as error:  # noqa: BLE001 - every failure is recorded, the rest goes on
+        seconds = time.perf_counter() - clock
+        message = f"{type(error).__name__}: {error}"
+        progress(f"      FAILED after {seconds:.1f} s: {message}")
+        return {"name": step.name, "title": step.title, "status": "failed", "seconds": seconds,
+                "message": message, "traceback": traceback.format_exc(limit=6)}
+    seconds = time.perf_counter() - clock
+    progress(f"      done in {seconds:.1f} s")
+    return {"name": step.name, "title": step.title, "status": "ok", "seconds": seconds,
+            "message": "", "result": result}
+
+
+def _say(progress: Progress, line: str) -> None:
+    """Pass a step's line on, indented; the estimators' per-iteration lines are left out."""
+    if not _ITERATION.search(line):
+        progress("      " + line)
+
+
+_ITERATION = re.compile(r"\b(iteration|generation) \d+\b")
+
+
+def _finish(out: Path, summary: dict, progress: Progress) -> dict:
+    from panto.report import write_report
+
+    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=_plain) + "\n")
+    try:
+        report = write_report(summary, out)
+        progress(f"wrote {report}")
+    except Exception as error:  # noqa: BLE001 - the summary is already on disk
+        summary["failed_steps"].append("report")
+        summary["report_error"] = f"{type(error).__name__}: {error}"
+        (out / "summary.json").write_text(json.dumps(summary, indent=2, default=_plain) + "\n")
     progress(f"done in {summary['wall_time_s']:.1f} s: {out / 'summary.json'}")
+    if summary["failed_steps"]:
+        raise DemoError(f"step(s) {summary['failed_steps']} failed (see {out / 'summary.json'} "
+                        f"and {out / 'report.html'}); the other results are written")
     return summary
 
 
-def _rig_campaign(out: Path, *, quick: bool, progress: Callable[[str], None]) -> dict:
-    """The thesis' two runs (APRBS training, ramp validation) on the virtual test bed."""
-    from dataclasses import replace
-    from importlib.resources import files
-
-    from rig.profiles import load_profile
-    from rig.recorder import new_run_folder
-    from rig.virtual import run_virtual_profile
-
-    runs = {}
-    for label, file, quick_duration in (("training", "aprbs_training.json", 8.0),
-                                        ("validation", "ramps_validation.json", 8.0)):
-        profile = load_profile(files("rig") / "profiles" / file)
-        if quick:
-            profile = replace(profile, duration=quick_duration)
-        folder = new_run_folder(out / "runs", prefix=label)  # a rerun never overwrites a run
-        clock = time.perf_counter()
-        result = run_virtual_profile(profile, fmu_path=out / "fmus" / "Pantograph.fmu",
-                                     folder=folder, seed=1 if label == "training" else 2,
-                                     progress=lambda s: progress("      " + s))
-        seconds = time.perf_counter() - clock
-        progress(f"      {label}: {profile.name}, {profile.duration:g} s in {seconds:.1f} s wall, "
-                 f"{result.status}")
-        if not result.success:
-            raise RuntimeError(f"the {label} run did not complete: {result.status}")
-        runs[label] = {"profile": profile.name, "duration_s": profile.duration,
-                       "folder": str(folder.relative_to(out)), "wall_s": seconds}
-    return runs
-
-
-def _nominal_against_measured(out: Path, label: str, folder: str,
-                              progress: Callable[[str], None]) -> dict:
-    """Simulate the nominal nonlinear and linearised FMUs on a run's measured inputs."""
-    from build_fmu.simulate import FmuSimulator
-    from rig.dataset import read_dataset
-
-    data = read_dataset(out / folder)
-    inputs = {"eta": 2.0 + data["motor_position"], "p": data["pressure"]}
-    measured = {"F_c": data["force"], "y_cb": 0.5 * (data["laser_1"] + data["laser_2"])}
-    responses = {}
-    for name in ("Pantograph", "PantographLinear"):
-        with FmuSimulator(out / "fmus" / f"{name}.fmu", interface="CS") as simulator:
-            responses[name] = simulator.simulate(data.time, inputs,
-                                                 start_values={"eta0": 2.0 + data["motor_position"][0],
-                                                               "p0": data["pressure"][0]}
-                                                 if name == "PantographLinear" else None)
-    fits = {name: {signal: _fit_percent(measured[signal], responses[name][signal])
-                   for signal in measured} for name in responses}
-    figure = _plot(data.time, inputs, measured, responses["Pantograph"],
-                   responses["PantographLinear"], title=f"{label} run (virtual test bed)")
-    figure.savefig(out / f"{label}_run.png", dpi=120)
-    progress(f"      {label}: nominal model fit on force {fits['Pantograph']['F_c']:.1f} %, "
-             f"on cross bar {fits['Pantograph']['y_cb']:.1f} % -> {label}_run.png")
-    return fits
-
-
-def _plot(t, inputs, measured, nonlinear, linear, *, title: str):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(4, 1, figsize=(11, 9), sharex=True)
-    axes[0].plot(t, (inputs["eta"] - 2.0) * 1e3, color="k", lw=0.8)
-    axes[0].set_ylabel("linear motor [mm]")
-    axes[1].plot(t, inputs["p"], color="k", lw=0.8)
-    axes[1].set_ylabel("pressure [bar]")
-    for ax, name, scale, unit in ((axes[2], "y_cb", 1e3, "mm"), (axes[3], "F_c", 1.0, "N")):
-        ax.plot(t, measured[name] * scale, color="0.55", lw=0.7, label="measured")
-        ax.plot(nonlinear.time, nonlinear[name] * scale, lw=0.9, label="nominal model (FMU)")
-        ax.plot(linear.time, linear[name] * scale, lw=0.9, ls="--", label="linearised FMU")
-        ax.set_ylabel(f"{name} [{unit}]")
-        ax.legend(loc="upper right")
-    axes[-1].set_xlabel("time [s]")
-    axes[0].set_title(f"{title}: measured vs the nominal pantograph model")
-    fig.tight_layout()
-    return fig
+def _plain(value: Any) -> Any:
+    """JSON fallback: numpy scalars and arrays, paths, mappings."""
+    if hasattr(value, "tolist"):
+        return value.tolist()
+    if isinstance(value, Mapping):
+        return dict(value)
+    return str(value)

@@ -7,6 +7,8 @@ import pytest
 from fmu_src.models import Model, default_parameters, load_parameters
 from fmu_src.parameters import ParameterError
 from panto.cli import main
+from rig.dataset import read_dataset
+from rig.profiles import load_profile
 
 
 def test_parameter_file_round_trip_keeps_values_units_and_provenance(tmp_path):
@@ -87,19 +89,72 @@ def test_cli_reports_bad_input_without_a_traceback(tmp_path, capsys):
     assert "reachable" in capsys.readouterr().err
 
 
-def test_quick_demo_runs_the_rig_campaign_and_compares_the_nominal_model(tmp_path):
+def test_quick_demo_runs_every_step_and_writes_the_report(tmp_path):
     assert main(["demo", "--quick", "--out", str(tmp_path)]) == 0
-    assert main(["demo", "--quick", "--out", str(tmp_path)]) == 0  # a rerun adds new runs
-    assert (tmp_path / "runs" / "training_0002" / "run.csv").is_file()
     summary = json.loads((tmp_path / "summary.json").read_text())
-    assert all(f["valid"] for f in summary["fmus"])
+    assert [s["status"] for s in summary["steps"]] == ["ok"] * 7
+    assert all(f["valid"] for f in summary["fmus"]["fmus"])
     for label in ("training", "validation"):
-        assert (tmp_path / f"{label}_run.png").stat().st_size > 10_000
+        folder = tmp_path / summary["rig"]["runs"][label]["folder"]
         for name in ("run.csv", "run.parquet", "run.mat", "truth.csv"):
-            assert (tmp_path / summary["rig_runs"][label]["folder"] / name).is_file()
-        fits = summary["nominal_model_fit_percent"][label]
+            assert (folder / name).is_file()
+        fits = summary["rig"]["nominal_model_fit_percent"][label]
         # The nominal model explains much of the cross-bar motion but not all: the rig's
         # imperfections (contact loss, friction, bar inertia, bellow lag) are on.
         assert 20.0 < fits["Pantograph"]["y_cb"] < 99.0
         # Linearised and nonlinear FMUs agree closely on the same small-signal inputs.
         assert abs(fits["Pantograph"]["y_cb"] - fits["PantographLinear"]["y_cb"]) < 5.0
+        # The video: the LED aligns the track with the run to within one camera frame of the
+        # camera's truth, and the tracked cross bar follows the lasers to a millimetre or so.
+        video = summary["video"]["runs"][label]
+        assert video["sync_confidence"] > 0.9
+        assert video["sync_error_samples"] == 0  # exact on the 500 Hz grid
+        assert video["video_vs_laser"]["std_mm"] < 2.0
+        merged = read_dataset(tmp_path / video["merged_dataset"])
+        assert "video_cross_bar_y" in merged.names and "force" in merged.names
+    physical = summary["identification"]["physical"]
+    identified, nominal = physical["fit_validation"], physical["nominal_fit_validation"]
+    # Fitted on the training run, the physical model predicts the withheld run better than the
+    # nominal parameters do (free run, both outputs).
+    assert np.mean(list(identified.values())) > np.mean(list(nominal.values())) + 5.0
+    assert (tmp_path / physical["parameter_file"]).is_file()
+    rows = summary["identification"]["comparison"]["rows"]
+    assert {r["structure"] for r in rows} >= {"physical-linear", "blackbox-4"}
+    diagnosis = summary["diagnosis"]
+    assert diagnosis["verdict"] in ("effect", "unexplained", "none")
+    assert all(diagnosis["fit_after"][o] >= diagnosis["fit_before"][o] - 1e-9
+               for o in diagnosis["fit_before"])
+    doe = summary["doe"]
+    assert doe["det_ratio_per_parameter"] > 1.0  # the design beats an APRBS of equal length
+    load_profile(tmp_path / doe["files"]["profile"])  # the rig accepts the designed run
+    cosim = {row["statistic"]: row for row in summary["cosim"]["statistics"]}
+    assert set(cosim) == {"mean", "std", "stat_max", "stat_min", "max", "min", "uplift_max_mm",
+                          "loss_pct"}
+    assert all(row["target"] is not None for row in cosim.values())
+    # The mean contact force along the line stays near the static force the pressure sets.
+    assert cosim["mean"]["value"] == pytest.approx(summary["cosim"]["static_force_N"], rel=0.15)
+    report = (tmp_path / "report.html").read_text()
+    assert "EN 50318" in report and "physical-linear" in report
+    assert report.count("data:image/png;base64") >= 10
+
+
+def test_a_failing_demo_step_is_recorded_and_the_others_still_run(tmp_path, monkeypatch):
+    import panto.demo as demo
+
+    def good(state, progress):
+        state["first"] = True
+        return {"value": 1}
+
+    def bad(state, progress):
+        raise ValueError("the valve is stuck at 7 bar")
+
+    monkeypatch.setattr(demo, "_steps", lambda: (
+        demo.Step("one", "first", good), demo.Step("two", "second", bad),
+        demo.Step("three", "needs the second", good, ("missing",)),
+        demo.Step("four", "independent", good, ("first",))))
+    assert main(["demo", "--quick", "--out", str(tmp_path)]) == 2  # non-zero at the end
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert [s["status"] for s in summary["steps"]] == ["ok", "failed", "skipped", "ok"]
+    assert summary["failed_steps"] == ["two", "three"]
+    assert summary["four"] == {"value": 1}
+    assert "valve is stuck" in (tmp_path / "report.html").read_text()

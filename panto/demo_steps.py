@@ -1,0 +1,207 @@
+"""Steps 1-2 of the main job: the FMUs, the rig campaign and the camera video (:mod:`panto.demo`).
+
+Each step is ``step(state, progress) -> dict``: it reads what earlier steps left in `state`
+(``out``, ``settings``, ``fmus``, ``runs``, ...), adds its own results there, and returns the
+JSON-ready part of ``summary.json``.
+"""
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+Progress = Callable[[str], None]
+
+#: The thesis' rig campaign: label, embedded profile, seed of the sensor noise.
+CAMPAIGN = (("training", "aprbs_training.json", 1), ("validation", "ramps_validation.json", 2))
+
+
+def fit_percent(measured: np.ndarray, simulated: np.ndarray) -> float:
+    """Fit % = 100 (1 - ||y - y_hat|| / ||y - mean(y)||) over the finite samples (thesis 4.1.3)."""
+    ok = np.isfinite(measured) & np.isfinite(simulated)
+    y, y_hat = measured[ok], simulated[ok]
+    return float(100 * (1 - np.linalg.norm(y - y_hat) / np.linalg.norm(y - y.mean())))
+
+
+def build_fmus(state: dict[str, Any], progress: Progress) -> dict:
+    """Step 1: generate, compile, package and validate the FMUs into ``out/fmus``."""
+    from build_fmu.project import build_project_fmus
+
+    out, settings = state["out"], state["settings"]
+    kwargs = {"names": settings.fmu_names} if settings.fmu_names else {}
+    built = build_project_fmus(out / "fmus", fmi_versions=settings.fmi_versions,
+                               progress=progress, **kwargs)
+    fmus = [{"file": b.path.name, "fmi_version": b.fmi_version, "valid": not b.problems,
+             "problems": list(b.problems)} for b in built]
+    invalid = [f["file"] for f in fmus if not f["valid"]]
+    if invalid:
+        raise RuntimeError(f"fmpy's validator rejected {invalid}")
+    state["fmus"] = out / "fmus"
+    return {"fmus": fmus, "all_valid": True, "count": len(fmus)}
+
+
+def run_rig_campaign(state: dict[str, Any], progress: Progress) -> dict:
+    """Step 2a: the two runs on the virtual test bed, and the nominal model against each."""
+    from dataclasses import replace
+    from importlib.resources import files
+
+    from rig.profiles import load_profile
+    from rig.recorder import new_run_folder
+    from rig.virtual import run_virtual_profile
+
+    out, settings = state["out"], state["settings"]
+    runs = {}
+    for label, file, seed in CAMPAIGN:
+        profile = load_profile(files("rig") / "profiles" / file)
+        if settings.run_duration:
+            profile = replace(profile, duration=settings.run_duration)
+        folder = new_run_folder(out / "runs", prefix=label)  # a rerun never overwrites a run
+        clock = time.perf_counter()
+        result = run_virtual_profile(profile, fmu_path=state["fmus"] / "Pantograph.fmu",
+                                     folder=folder, seed=seed, progress=progress)
+        seconds = time.perf_counter() - clock
+        progress(f"{label}: {profile.name}, {profile.duration:g} s in {seconds:.1f} s wall, "
+                 f"{result.status}")
+        if not result.success:
+            raise RuntimeError(f"the {label} run did not complete: {result.status}")
+        runs[label] = {"profile": profile.name, "duration_s": profile.duration,
+                       "folder": str(folder.relative_to(out)), "wall_s": seconds}
+    state["runs"] = {label: out / run["folder"] for label, run in runs.items()}
+    nominal = {label: _nominal_against_measured(out, label, state["runs"][label], progress)
+               for label in runs}
+    return {"runs": runs, "nominal_model_fit_percent": nominal,
+            "plots": {label: f"{label}_run.png" for label in runs}}
+
+
+def _nominal_against_measured(out: Path, label: str, folder: Path, progress: Progress) -> dict:
+    """Simulate the nominal nonlinear and linearised FMUs on a run's measured inputs."""
+    from build_fmu.simulate import FmuSimulator
+    from rig.dataset import read_dataset
+
+    data = read_dataset(folder)
+    zero = float(data.metadata.extra.get("rig_setup", {}).get("motor_zero_height", 2.0))
+    inputs = {"eta": zero + data["motor_position"], "p": data["pressure"]}
+    measured = {"F_c": data["force"], "y_cb": np.nanmean(
+        np.vstack([data["laser_1"], data["laser_2"]]), axis=0)}
+    responses = {}
+    for name in ("Pantograph", "PantographLinear"):
+        start = ({"eta0": float(inputs["eta"][0]), "p0": float(inputs["p"][0])}
+                 if name == "PantographLinear" else None)
+        with FmuSimulator(out / "fmus" / f"{name}.fmu", interface="CS") as simulator:
+            responses[name] = simulator.simulate(data.time, inputs, start_values=start)
+    fits = {name: {signal: fit_percent(measured[signal], np.asarray(responses[name][signal]))
+                   for signal in measured} for name in responses}
+    figure = plot_trajectories(data.time, inputs, zero, measured, responses,
+                               title=f"{label} run (virtual test bed)")
+    figure.savefig(out / f"{label}_run.png", dpi=110)
+    progress(f"{label}: nominal model fit on force {fits['Pantograph']['F_c']:.1f} %, on cross "
+             f"bar {fits['Pantograph']['y_cb']:.1f} % -> {label}_run.png")
+    return fits
+
+
+def plot_trajectories(t: np.ndarray, inputs: dict, zero: float, measured: dict, responses: dict,
+                      *, title: str):
+    """Inputs, measured outputs and the nominal FMUs' responses over time (one figure)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(4, 1, figsize=(11, 9), sharex=True)
+    axes[0].plot(t, (inputs["eta"] - zero) * 1e3, color="k", lw=0.8)
+    axes[0].set_ylabel("linear motor [mm]")
+    axes[1].plot(t, inputs["p"], color="k", lw=0.8)
+    axes[1].set_ylabel("pressure [bar]")
+    styles = {"Pantograph": ("nominal model (FMU)", "-"),
+              "PantographLinear": ("linearised FMU", "--")}
+    for ax, name, scale, unit in ((axes[2], "y_cb", 1e3, "mm"), (axes[3], "F_c", 1.0, "N")):
+        ax.plot(t, measured[name] * scale, color="0.55", lw=0.7, label="measured")
+        for fmu, response in responses.items():
+            ax.plot(response.time, np.asarray(response[name]) * scale, lw=0.9,
+                    ls=styles[fmu][1], label=styles[fmu][0])
+        ax.set_ylabel(f"{name} [{unit}]")
+        ax.legend(loc="upper right")
+    axes[-1].set_xlabel("time [s]")
+    axes[0].set_title(f"{title}: measured vs the nominal pantograph model")
+    fig.tight_layout()
+    return fig
+
+
+def film_runs(state: dict[str, Any], progress: Progress) -> dict:
+    """Step 2b: film, track, synchronise and merge a window of each run (camera at reduced
+    resolution: a 1080p frame costs ~37 s of rendering per 20 s of video on this machine)."""
+    out, settings = state["out"], state["settings"]
+    videos = {}
+    for label, folder in state["runs"].items():
+        videos[label] = _film_one(label, folder, out / "video", settings, progress)
+    state["merged"] = {label: Path(v["merged_dataset"]) for label, v in videos.items()}
+    confidences = [v["sync_confidence"] for v in videos.values()]
+    return {"runs": {k: {**v, "merged_dataset": str(Path(v["merged_dataset"]).relative_to(out))}
+                     for k, v in videos.items()},
+            "min_sync_confidence": float(min(confidences)),
+            "camera": {"scale": settings.video_scale, "window_s": settings.video_window}}
+
+
+def _film_one(label: str, folder: Path, video_dir: Path, settings: Any,
+              progress: Progress) -> dict:
+    from video_sync.camera import CameraSetup, render_run
+    from video_sync.merge import sync_and_merge
+    from video_sync.setup import setup_from_camera
+    from video_sync.tracking import track_video
+
+    video_dir.mkdir(parents=True, exist_ok=True)
+    camera = CameraSetup().reduced(settings.video_scale) if settings.video_scale != 1 \
+        else CameraSetup()
+    clock = time.perf_counter()
+    video = render_run(folder, video_dir / f"{label}.mp4", setup=camera, rng=7,
+                       duration=settings.video_window)
+    rendered = time.perf_counter() - clock
+    tracker = setup_from_camera(video.camera_json)
+    tracker.save(video_dir / f"{label}_setup.json")
+    track = track_video(video.path, tracker, workers=1)
+    track_csv = video_dir / f"{label}_track.csv"
+    track.to_csv(track_csv)
+    merged_folder = folder / "video_merged"
+    if (merged_folder / "run.csv").exists():
+        (merged_folder / "run.csv").unlink()  # the step was rerun on the same run folder
+    merged = sync_and_merge(folder, track_csv, merged_folder,
+                            plot=video_dir / f"{label}_sync.png")
+    agreement = _video_against_laser(merged.dataset)
+    # Frame k shows the truth at run time start_time + k / fps (start_sample indexes truth.csv,
+    # whose rows begin before the run's t = 0); the merge puts it at (shift + 1 + 10 k) samples.
+    sample_period = 1.0 / float(merged.dataset.metadata.sample_rate)
+    placed = (int(merged.sync.shift) + int(merged.dataset.metadata.extra["video_sync"]
+                                           ["led_delay_samples"])) * sample_period
+    error = int(round((placed - float(video.start_time)) / sample_period))
+    seconds = time.perf_counter() - clock
+    progress(f"{label}: {video.frame_count} frames {camera.width}x{camera.height} rendered in "
+             f"{rendered:.1f} s; sync confidence {merged.sync.confidence:.3f}, shift "
+             f"{merged.sync.shift} samples; video vs laser cross bar RMS "
+             f"{agreement['rms_mm']:.2f} mm (offset {agreement['mean_mm']:+.2f} mm); against the "
+             f"camera's truth the alignment is off by {error} samples ({seconds:.1f} s)")
+    return {"video": str(video.path.name), "frames": video.frame_count,
+            "resolution": [camera.width, camera.height], "render_s": rendered,
+            "total_s": seconds, "sync_confidence": float(merged.sync.confidence),
+            "peak_ratio": float(merged.sync.peak_ratio), "shift_samples": int(merged.sync.shift),
+            "true_start_sample": int(video.start_sample), "sync_error_samples": error,
+            "lost_frames": dict(track.lost_frames),
+            "merged_dataset": str(merged.path), "merged_samples": len(merged.dataset),
+            "video_vs_laser": agreement, "sync_plot": f"video/{label}_sync.png"}
+
+
+def _video_against_laser(dataset: Any) -> dict:
+    """RMS difference between the tracked cross-bar marker and the lasers' mean [mm]."""
+    names = set(dataset.names)
+    if "video_cross_bar_y" not in names:
+        return {"rms_mm": float("nan"), "samples": 0, "note": "no cross_bar marker track"}
+    video = np.asarray(dataset["video_cross_bar_y"], float)
+    laser = np.nanmean(np.vstack([dataset["laser_1"], dataset["laser_2"]]), axis=0)
+    ok = np.isfinite(video) & np.isfinite(laser)
+    difference = video[ok] - laser[ok]
+    return {"rms_mm": float(1e3 * np.sqrt(np.mean(difference ** 2))) if ok.any() else float("nan"),
+            "mean_mm": float(1e3 * np.mean(difference)) if ok.any() else float("nan"),
+            "std_mm": float(1e3 * np.std(difference)) if ok.any() else float("nan"),
+            "samples": int(ok.sum())}
