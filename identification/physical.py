@@ -218,9 +218,10 @@ class PhysicalLinear(_PhysicalBase):
             raise IdentificationError(f"{self.name}: singular linearisation ({error})") from None
         phi, gamma0, gamma1 = discretise(a, b, data.sample_period, self.hold)
         drive = du[:-1] @ gamma0.T + np.diff(du, axis=0) @ gamma1.T
-        states = propagate(phi, drive, x_start)
         rows = self._rows()
-        y = y0[rows] + states @ c[rows].T + du @ d[rows].T
+        with np.errstate(over="ignore", invalid="ignore"):  # an unstable candidate: refused below
+            states = propagate(phi, drive, x_start)
+            y = y0[rows] + states @ c[rows].T + du @ d[rows].T
         if not np.all(np.isfinite(y)) or np.max(np.abs(np.linalg.eigvals(phi))) > 1.0 + 1e-9:
             raise IdentificationError(f"{self.name}: unstable linearisation for {dict(parameters)}")
         return y
