@@ -111,7 +111,8 @@ def pantograph_data(dataset: Any, *, rate: float | None = 50.0,
     rate : float or None
         Identification rate [Hz] (thesis: 50 Hz).
     outputs : sequence of str
-        Any of ``"F_c"``, ``"y_cb"``.
+        Any of ``"F_c"``, ``"y_cb"`` and ``"xi"`` (the head height: the merged video channel
+        ``video_pan_head_y``, see :mod:`video_sync.merge`).
     eta_offset : float, optional
         Height [m] of the motor's zero; default ``metadata.extra["rig_setup"]["motor_zero_height"]``.
     start, stop : float, optional
@@ -136,7 +137,8 @@ def pantograph_data(dataset: Any, *, rate: float | None = 50.0,
     if cross_bar not in ("laser", "video"):
         raise IdentificationError(f"cross_bar {cross_bar!r}: choose 'laser' or 'video'")
     makers: dict[str, Channel] = {"F_c": "force", "y_cb": _cross_bar_laser
-                                  if cross_bar == "laser" else "video_cross_bar_y"}
+                                  if cross_bar == "laser" else "video_cross_bar_y",
+                                  "xi": "video_pan_head_y"}
     unknown = [o for o in outputs if o not in makers]
     if unknown or not outputs:
         raise IdentificationError(f"{source}: outputs {list(outputs)}: choose from {list(makers)}")

@@ -48,7 +48,9 @@ def run_identify(args: argparse.Namespace) -> int:
     def load(path: str):
         return pantograph_data(path, rate=args.rate, eta_offset=args.eta_offset, start=args.start,
                                stop=args.stop, cross_bar=args.cross_bar,
-                               position_latency=args.position_latency)
+                               position_latency=args.position_latency,
+                               outputs=("F_c", "y_cb", "xi") if args.model == "collector-head"
+                               else ("F_c", "y_cb"))
 
     data = load(args.dataset)
     validation = load(args.validate) if args.validate else None
@@ -71,7 +73,9 @@ def run_identify(args: argparse.Namespace) -> int:
         if executor is not None:
             executor.shutdown()
     _print_result(result, validation)
-    if args.out:
+    if args.out and args.model == "collector-head":
+        _write_collector_head(data, Path(args.out))
+    elif args.out:
         nominal = _nominal(args.model)
         paths = write_identification(result, args.out, data=data, validation=validation,
                                      nominal=nominal)
@@ -84,6 +88,18 @@ def run_identify(args: argparse.Namespace) -> int:
         Path(args.json).write_text(json.dumps(summary, indent=2, default=str) + "\n")
         _say(f"wrote {args.json}")
     return 0 if result.success else 1
+
+
+def _write_collector_head(data, folder: Path) -> None:
+    """The head's PT2 fits (eqs. 4.15/4.16) as JSON and their Bode plot against the H1 estimate."""
+    from identification.collector_head import identify_collector_head, plot_collector_head
+
+    folder.mkdir(parents=True, exist_ok=True)
+    head = identify_collector_head(data)
+    (folder / "result.json").write_text(json.dumps(head.to_dict(), indent=2, default=str) + "\n")
+    plot_collector_head(head, folder / "bode.png")
+    _say(f"wrote {folder / 'result.json'}")
+    _say(f"wrote {folder / 'bode.png'}")
 
 
 def _nominal(model: str) -> dict[str, float] | None:
