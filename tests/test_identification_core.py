@@ -172,3 +172,17 @@ def test_unidentifiable_parameter_is_named():
     assert set(report["not_identifiable"]) == {"K", "G"}
     assert report["identifiable"] == ["tau"]
     assert "traded off against G" in report["not_identifiable"]["K"]
+
+
+def test_pantograph_data_takes_the_head_height_from_the_merged_video():
+    from dataclasses import replace
+
+    dataset, _, laser_1 = _rig_dataset({"rig_setup": {"motor_zero_height": 2.0}})
+    head = laser_1 + 0.1
+    merged = replace(dataset, channels={**dataset.channels, "video_pan_head_y": head,
+                                        "video_cross_bar_y": laser_1},
+                     units={**dataset.units, "video_pan_head_y": "m", "video_cross_bar_y": "m"})
+    data = pantograph_data(merged, rate=None, outputs=("F_c", "y_cb", "xi"), cross_bar="video")
+    assert np.allclose(data.output("xi"), head) and np.allclose(data.output("y_cb"), laser_1)
+    with pytest.raises(IdentificationError, match="video_pan_head_y"):
+        pantograph_data(dataset, rate=None, outputs=("xi",))
