@@ -7,11 +7,16 @@ causes it, and how far the gap shrinks once that effect is in the model (issue 8
    :func:`~identification.least_squares.fit_least_squares`).
 2. **Where.** :func:`~identification.residual_analysis.analyse_residuals` on the validation free-run
    residual (fit, band and segment energy, whiteness, input cross-correlation, error model,
-   even/odd nonlinearity, conditions). The gap is *significant* when, for some output, the residual
-   is correlated with an input, with a power signal (nonlinearity tests), or its mean differs from
-   zero, each at 1 % after a Bonferroni correction over the lags and signals tested, the mean's
-   standard error from the effective sample size ``N_eff = N / (1 + 2 sum r(tau)^2)``. Whiteness alone
-   does not count: a free-run residual may be coloured by coloured measurement noise.
+   even/odd nonlinearity, conditions). The gap is tested on that residual less what a local
+   retuning of the nominal's free parameters on the validation run would remove (their
+   sensitivities projected out: the training fit's estimation error is not a gap), and a gap
+   too when that retuning disagrees with the training estimate (``chi2`` of the retuning against
+   the two runs' parameter covariances at 1 %). It is *significant* when, for some output, the
+   residual is correlated with an input, with a power signal (nonlinearity tests), or its mean
+   differs from zero, each at 1 % after a Bonferroni correction over the lags and signals tested,
+   the mean's standard error from the effective sample size ``N_eff = N / (1 + 2 sum r(tau)^2)``.
+   Whiteness alone does not count: a free-run residual may be coloured by coloured measurement
+   noise.
 3. **Which.** Rank the candidates of :data:`~identification.effects.EFFECTS` by FROLS on the
    *training* residual (the validation run stays withheld), the nominal parameters' sensitivities
    projected out; refit the top ``max_refits`` significant ones as
@@ -46,7 +51,7 @@ from identification.base import (IdentificationData, IdentificationError, ModelS
                                  fit_percent)
 from identification.diagnosis_support import (build_structure, default_roles, effective_samples,
                                                gap_significance, judge_trial, rank_candidates,
-                                               residuals, where_summary)
+                                               residuals, retuning, where_summary)
 from identification.effects import EFFECTS, SignalRoles
 from identification.least_squares import fit_least_squares
 from identification.residual_analysis import OutputAnalysis, _jsonable, analyse_residuals
@@ -149,6 +154,7 @@ class _Model:
     parameters: dict[str, float]
     free: tuple[str, ...]
     std: dict[str, float] = field(default_factory=dict)
+    covariance: np.ndarray | None = None
 
 
 def diagnose(train: IdentificationData, validation: IdentificationData, *,
@@ -208,11 +214,12 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
         f"and {len(validation)} validation samples, outputs {list(train.output_names)}")
     result = fit_least_squares(nominal, train.select_outputs(_fitted(nominal, train)), free=free,
                                progress=_indent(progress), **fit_options)
-    model = _Model(nominal, dict(result.parameters), tuple(free), dict(result.std))
+    model = _Model(nominal, dict(result.parameters), tuple(free), dict(result.std),
+                   np.asarray(result.covariance, float))
     say(f"diagnose: nominal fit on training: " + _fits(result.fit))
     before = _simulate(model, validation)
     analysis_before = _analyse(validation, before, model, roles)
-    gap = gap_significance(analysis_before, validation)
+    gap = _gap(model, validation, before, roles)
     fit_before = _fit(validation, before)
     say("diagnose: where: validation fit " + _fits(fit_before) + "; gap " +
         ("significant: " + "; ".join(gap["reasons"]) if gap["significant"] else "within the noise"))
@@ -237,7 +244,7 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
         say(f"diagnose: accepted {trial.effect}: validation fit " + _fits(trial.fit_validation))
         model, current = new_model, simulated
     analysis_after = _analyse(validation, current, model, roles) if steps else analysis_before
-    remaining_gap = gap_significance(analysis_after, validation) if steps else gap
+    remaining_gap = _gap(model, validation, current, roles) if steps else gap
     verdict = "effect" if steps else ("unexplained" if gap["significant"] else "none")
     fit_after = _fit(validation, current)
     where = where_summary(analysis_before, validation)
@@ -296,6 +303,20 @@ def _analyse(data: IdentificationData, simulated: np.ndarray, model: _Model,
                              conditions=conditions, velocity=velocity, error_model_orders=orders)
 
 
+def _gap(model: _Model, data: IdentificationData, simulated: np.ndarray,
+         roles: SignalRoles) -> dict[str, Any]:
+    """The gap's significance on the residual no retuning of the model's free parameters
+    explains, and whether that retuning agrees with the training estimate
+    (:func:`~identification.diagnosis_support.retuning`); the nonlinearity tests keep the
+    model's own prediction as their signal."""
+    from dataclasses import replace
+
+    tuning = retuning(model.structure, model.parameters, model.free, data, simulated,
+                      model.covariance)
+    retuned = replace(data, outputs=data.outputs - (tuning["prediction"] - simulated))
+    return gap_significance(_analyse(retuned, simulated, model, roles), data, tuning=tuning)
+
+
 def _try(model: _Model, candidate: Mapping[str, Any], train: IdentificationData,
          validation: IdentificationData, current: np.ndarray, roles: SignalRoles, folds: int,
          fit_options: Mapping[str, Any], say: Progress) -> tuple[Trial, _Model, np.ndarray]:
@@ -306,7 +327,8 @@ def _try(model: _Model, candidate: Mapping[str, Any], train: IdentificationData,
         free = tuple(model.free) + tuple(p for p in structure.effect_parameters
                                          if p not in model.free)
         result = _refit(structure, model, train, free, fit_options)
-        new = _Model(structure, dict(result.parameters), free, dict(result.std))
+        new = _Model(structure, dict(result.parameters), free, dict(result.std),
+                     np.asarray(result.covariance, float))
         simulated = _simulate(new, validation)
         trial = judge_trial(candidate, structure, result, model, train, validation, current,
                             simulated, folds)
