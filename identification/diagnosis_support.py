@@ -28,6 +28,7 @@ from identification.base import (IdentificationData, IdentificationError, Identi
                                  ModelStructure, fit_percent)
 from identification.effects import (SignalRoles, build_candidate_regressors, filter_sensitivity,
                                     name_signals, rank_effects)
+from identification.residual_analysis import excited_band
 
 #: Parameter of an effect whose significance is tested (default: its first parameter).
 MAGNITUDE = {"extra_mode": "extra_mode:gain"}
@@ -410,8 +411,9 @@ def gap_significance(analysis: Sequence[Any], data: IdentificationData,
                                                     * n_outputs), 2))
         for i, name in enumerate(model.input_names):
             ratio = np.abs(model.response[i]) / np.maximum(model.radius[i] / level, 1e-300)
-            ratio = np.where(_excited(data.input(name), data.sample_period, model.frequencies),
-                             ratio, 0.0)
+            excited = model.excited[i] if model.excited is not None else \
+                excited_band(data.input(name), data.sample_period, model.frequencies)
+            ratio = np.where(excited, ratio, 0.0)
             if np.max(ratio) > z_e:
                 k = int(np.argmax(ratio))
                 found.append(f"{a.output_name}: model error model from {name} leaves its "
@@ -430,18 +432,6 @@ def gap_significance(analysis: Sequence[Any], data: IdentificationData,
         if tuning is not None else {}
     return {"significant": bool(reasons), "reasons": reasons, "per_output": per_output,
             "parameter_consistency": consistency}
-
-
-def _excited(u: np.ndarray, sample_period: float, frequencies: np.ndarray,
-             dynamic_range_db: float = 40.0) -> np.ndarray:
-    """Frequencies where the input carries power within `dynamic_range_db` of its peak: the error
-    model is only tested there (elsewhere its estimate extrapolates)."""
-    from scipy import signal as sps
-
-    f, power = sps.welch(np.asarray(u, float) - np.mean(u), 1.0 / sample_period,
-                         nperseg=min(len(u), 256))
-    level = np.interp(frequencies, f, power)
-    return level > np.max(power) * 10 ** (-dynamic_range_db / 10)
 
 
 def where_summary(analysis: Sequence[Any], data: IdentificationData) -> dict[str, Any]:

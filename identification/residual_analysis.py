@@ -276,7 +276,7 @@ def excited_band(u: np.ndarray, sample_period: float, frequencies: np.ndarray, *
     from scipy import signal as sps
 
     x = np.asarray(u, float) - np.mean(u)
-    f, power = sps.welch(x, 1.0 / sample_period, nperseg=min(len(x), 512))
+    f, power = sps.welch(x, 1.0 / sample_period, nperseg=min(len(x), 256))
     if not np.any(power > 0):
         return np.zeros(len(frequencies), bool)
     level = np.interp(frequencies, f, power)
