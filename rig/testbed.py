@@ -151,6 +151,7 @@ class VirtualTestBed:
         self._robot = _RobotMode(imp, dt)
         self._slider = (slider_position, 0.0)
         self._eta = (self.motor_zero_height + slider_position,) * 2
+        self._bellow_previous = pressure
         self._time = float(start_time)
         outputs = self._fmu.initialise([self._eta[-1], pressure], start_time=start_time)
         self._history.clear()
@@ -196,7 +197,15 @@ class VirtualTestBed:
         self._eta = (self._eta[-1], eta)
         measured_pressure = self._valve.step(self.valve_voltage, dt)
         bellow = self._bellow.step(measured_pressure)
-        outputs = self._fmu.step([eta, bellow])
+        # The plant moves continuously between samples: step it on the mean of the inputs over
+        # the step (second-order accurate for inputs linear in time, as the models assume), then
+        # read the outputs with the inputs at the end of the step (the contact force feeds eta
+        # through). Holding the end value over the step would show the plant's states eta half a
+        # sample early.
+        self._fmu.step([0.5 * (self._eta[-2] + eta), 0.5 * (self._bellow_previous + bellow)])
+        self._fmu.set_inputs([eta, bellow])
+        outputs = self._fmu.outputs()
+        self._bellow_previous = bellow
         self._time = float(time)
         sample = self._sample(outputs, measured_pressure, bellow, bar_acceleration)
         self._keep(sample)

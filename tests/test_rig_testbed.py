@@ -45,8 +45,9 @@ def test_ideal_rig_measures_the_python_model(pantograph_fmu):
     samples = _run(pantograph_fmu, RigImperfections.none(), slider)
     model = Model("Pantograph")
     x0 = model.equilibrium(2.0, 4.0)
-    # The plant holds each sample's bar height over the step that ends at it.
-    eta_held = 2.0 + np.concatenate([slider[1:], slider[-1:]])
+    # The plant holds the mean of each step's end samples over the step (the held input at t_k
+    # belongs to the step [t_k, t_k+1]).
+    eta_held = 2.0 + 0.5 * (slider + np.concatenate([slider[1:], slider[-1:]]))
     response = simulate_model(model, time, {"eta": eta_held, "p": np.full_like(time, 4.0)},
                               initial_state=x0, interpolation="hold", method="LSODA",
                               rtol=1e-9, atol=1e-11)
