@@ -21,6 +21,8 @@ Inside the dynamics
     the nominal's own parameters when it has them: the nonlinear pantograph (``physical``):
     ``coulomb_friction -> T_f`` (hinge friction torque), ``cubic_stiffness -> k_c3`` (head
     suspension), ``contact_loss -> unilateral_contact = 1`` (a switch: no new parameter);
+    an effect acting where an input acts, as that input's equivalent (:data:`EQUIVALENT_INPUTS`:
+    the linearised pantograph's hinge friction as a pressure ``p + c tanh(v / v_s)``);
     a nominal with ``with_effect`` (the linear OE model: a feedback term ``c phi(y)`` as an extra
     input of its dynamics; the rigid body: ``F_c tanh(q'/v_s)``);
     otherwise a quasi-static additive term on the force (or target) output:
@@ -40,7 +42,7 @@ import numpy as np
 from scipy import signal as sps
 
 from identification.base import IdentificationData, IdentificationError, ModelStructure
-from identification.effects import EFFECTS, SignalRoles
+from identification.effects import EFFECTS, SignalRoles, play_operator
 from identification.rigid_body import motion
 
 INPUT_SIDE = ("input_delay", "actuator_lag", "dead_zone", "saturation")
@@ -50,6 +52,12 @@ INSIDE = ("coulomb_friction", "cubic_stiffness", "contact_loss")
 NATIVE_PARAMETERS = {"physical": {"coulomb_friction": "T_f", "cubic_stiffness": "k_c3"}}
 #: Native switches (a fixed model parameter set to 1; no new parameter).
 NATIVE_SWITCHES = {"physical": {"contact_loss": "unilateral_contact"}}
+#: Effects that act where an input acts (an *equivalent input*): the pantograph's hinge friction
+#: torque ``T_f tanh(phi1'/w)`` acts on the lower arm ``phi1`` exactly where the bellow torque
+#: ``k_p p`` does (thesis eq. 2.23, generalised force on ``phi1``), so in the linearised model it is
+#: the pressure ``p + c tanh(v / v_s)`` with ``c = -T_f / k_p`` [bar] (``v`` the collector bar's
+#: velocity, the sign of ``phi1'``): friction inside the dynamics, reaching both outputs.
+EQUIVALENT_INPUTS = {"physical-linear": {"coulomb_friction": "p"}}
 _DERIVATIVE_CUTOFF = 0.4
 
 
@@ -59,6 +67,13 @@ def _native(nominal: ModelStructure, effect: str) -> str | None:
 
 def _switch(nominal: ModelStructure, effect: str) -> str | None:
     return NATIVE_SWITCHES.get(nominal.name, {}).get(effect)
+
+
+def equivalent_input(nominal: ModelStructure, effect: str) -> str | None:
+    """The input through which `effect` acts in `nominal` (:data:`EQUIVALENT_INPUTS`), or None;
+    an augmented nominal answers for its innermost structure."""
+    name = EQUIVALENT_INPUTS.get(str(nominal.name).split("+")[0], {}).get(effect)
+    return name if name in nominal.input_names else None
 
 
 def _has_inside_form(nominal: ModelStructure, effect: str) -> bool:
@@ -111,6 +126,16 @@ class AugmentedStructure(ModelStructure):
             self.mode = "native"
             name = _native(nominal, effect)
             self._starts[name] = float(self.setting.get("native_start", nominal.nominal()[name]))
+        elif effect in INSIDE and equivalent_input(nominal, effect):
+            self.mode = "equivalent"
+            name = f"{effect}:{equivalent_input(nominal, effect)}"
+            start = float(self.setting.get("coefficient", 0.0) or 0.0)
+            size = float(self.setting.get("input_scale", 1.0) or 1.0)
+            self._add(name, start, (-max(100 * abs(start), 10 * size),
+                                    max(100 * abs(start), 10 * size)))
+            width = float(self.setting.get("presliding", 0.0) or 0.0)
+            if width > 0:
+                self._add(f"{effect}:presliding", width, (0.05 * width, 20.0 * width))
         elif effect in INSIDE + ("offset",) and _has_inside_form(nominal, effect):
             self.mode = "inside"
             self.base = nominal.with_effect(effect, self.setting)
@@ -225,6 +250,8 @@ class AugmentedStructure(ModelStructure):
             return self.base.simulate({**self._starts, **inner}, data)
         if self.mode in ("inside", "switch"):
             return self.base.simulate(inner, data)
+        if self.mode == "equivalent":
+            return self._simulate_equivalent(values, inner, data)
         if self.effect in INPUT_SIDE and not self._on_output():
             data = self._transform_inputs(values, data)
             return self.base.simulate(inner, data)
@@ -234,6 +261,28 @@ class AugmentedStructure(ModelStructure):
     def _on_output(self) -> bool:
         return self.effect == "saturation" and self.setting.get("signal") in self.output_names \
             and self.setting.get("signal") not in self.input_names
+
+    def _simulate_equivalent(self, values: Mapping[str, float], inner: Mapping[str, float],
+                             data: IdentificationData) -> np.ndarray:
+        """Two passes: the velocity of the position role from the free run without the effect,
+        then the free run with the equivalent input ``u + c tanh(v / v_s)``, or, for a joint that
+        sticks, ``u + c (x - play_b(x)) / b`` (elasto-plastic friction, ``b`` fitted; a first-order
+        correction of the feedback: the effect barely moves the reversals)."""
+        name = equivalent_input(self.nominal_structure, self.effect)
+        first = np.asarray(self.base.simulate(inner, data), float)
+        if f"{self.effect}:presliding" in values:
+            x = self._signal(self.roles.position, data, first)
+            b = values[f"{self.effect}:presliding"]
+            shape = (x - play_operator(x, b)) / b
+        else:
+            velocity = self._motion(data, first)[0]
+            width = float(self.setting.get("v_s", 0.0))
+            shape = np.tanh(velocity / width) if width > 0 else np.sign(velocity)
+        inputs = np.array(data.inputs, float)
+        inputs[:, data.input_names.index(name)] += values[f"{self.effect}:{name}"] * shape
+        shifted = IdentificationData(data.time, inputs, data.outputs, data.input_names,
+                                     data.output_names, data.units, data.source, data.metadata)
+        return self.base.simulate(inner, shifted)
 
     # --- transforms -----------------------------------------------------------------------
     def _transform_inputs(self, values: Mapping[str, float], data: IdentificationData
@@ -318,6 +367,7 @@ def mode_response(w: np.ndarray, frequency: float, damping: float, sample_period
 def describe_augmentation(structure: AugmentedStructure) -> str:
     """One line: the effect, how it enters and its parameters."""
     where = {"native": "the nominal's own parameter", "switch": "a model switch",
+             "equivalent": "inside the dynamics, as an equivalent input",
              "inside": "inside the dynamics", "wrapper": "input side" if structure.effect in
              INPUT_SIDE else "output side"}[structure.mode]
     return (f"{structure.effect} ({where}; parameters "
@@ -325,4 +375,5 @@ def describe_augmentation(structure: AugmentedStructure) -> str:
 
 
 __all__ = ["AugmentedStructure", "mode_response", "describe_augmentation", "INPUT_SIDE",
-           "OUTPUT_SIDE", "INSIDE", "NATIVE_PARAMETERS", "NATIVE_SWITCHES"]
+           "OUTPUT_SIDE", "INSIDE", "NATIVE_PARAMETERS", "NATIVE_SWITCHES", "EQUIVALENT_INPUTS",
+           "equivalent_input"]

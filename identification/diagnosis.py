@@ -7,11 +7,15 @@ causes it, and how far the gap shrinks once that effect is in the model (issue 8
    :func:`~identification.least_squares.fit_least_squares`).
 2. **Where.** :func:`~identification.residual_analysis.analyse_residuals` on the validation free-run
    residual (fit, band and segment energy, whiteness, input cross-correlation, error model,
-   even/odd nonlinearity, conditions). The gap is tested on that residual less what a local
-   retuning of the nominal's free parameters on the validation run would remove (their
+   even/odd nonlinearity, conditions). The gap is tested on that residual less what one joint
+   local retuning of the nominal's free parameters on the validation run would remove (their
    sensitivities projected out: the training fit's estimation error is not a gap), and a gap
    too when that retuning disagrees with the training estimate (``chi2`` of the retuning against
-   the two runs' parameter covariances at 1 %). It is *significant* when, for some output, the
+   the two runs' parameter covariances at 1 %); the nominal's settling time is left out at the
+   start (a record that does not start at rest). A test counts only for an output whose
+   residual's systematic part costs at least ``RELEVANCE`` = 2 fit points (engineering
+   relevance, :data:`~identification.diagnosis_support.RELEVANCE`). It is *significant* when,
+   for some output, the
    residual is correlated with an input, with a power signal (nonlinearity tests), or its mean
    differs from zero, each at 1 % after a Bonferroni correction over the lags and signals tested,
    the mean's standard error from the effective sample size ``N_eff = N / (1 + 2 sum r(tau)^2)``.
@@ -26,8 +30,10 @@ causes it, and how far the gap shrinks once that effect is in the model (issue 8
    magnitude parameter is significant, ``|theta| / sigma_theta > 3``, ``sigma_theta`` inflated by
    ``sqrt(N / N_eff)`` for coloured residuals; (c) on the validation run the free-run fit (mean
    over outputs) improves by more than the spread of the improvement across ``folds`` blocked
-   folds (its standard error ``std / sqrt(folds)``). The best passing candidate (largest validation improvement) is
-   accepted, and the search repeats on what remains (``max_effects``).
+   folds (its standard error ``std / sqrt(folds)``). The passing candidate with the largest
+   validation improvement is accepted, unless others come within that improvement's standard
+   error: then the lowest ``dBIC`` among them (parsimony, :func:`_choose`); the search repeats on
+   what remains (``max_effects``).
 4. **How far.** Per accepted effect: the validation fit before and after per output, residual
    energy per band and segment before and after, the share of residual energy removed, and the
    effect's parameters with their standard deviations.
@@ -51,7 +57,8 @@ from identification.base import (IdentificationData, IdentificationError, ModelS
                                  fit_percent)
 from identification.diagnosis_support import (build_structure, default_roles, effective_samples,
                                                gap_significance, judge_trial, rank_candidates,
-                                               residuals, retuning, where_summary)
+                                               residuals, retuning, settling_time,
+                                               systematic_cost, where_summary)
 from identification.effects import EFFECTS, SignalRoles
 from identification.least_squares import fit_least_squares
 from identification.residual_analysis import OutputAnalysis, _jsonable, analyse_residuals
@@ -238,7 +245,7 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
         if not passing:
             say("diagnose: no candidate passes on the withheld data; stop")
             break
-        trial, new_model, simulated = max(passing, key=lambda t: t[0].improvement)
+        trial, new_model, simulated = _choose(passing, folds)
         steps.append(_step(trial, validation, current, simulated))
         accepted.append(trial.effect)
         say(f"diagnose: accepted {trial.effect}: validation fit " + _fits(trial.fit_validation))
@@ -305,16 +312,27 @@ def _analyse(data: IdentificationData, simulated: np.ndarray, model: _Model,
 
 def _gap(model: _Model, data: IdentificationData, simulated: np.ndarray,
          roles: SignalRoles) -> dict[str, Any]:
-    """The gap's significance on the residual no retuning of the model's free parameters
+    """The gap's significance on the residual no joint retuning of the model's free parameters
     explains, and whether that retuning agrees with the training estimate
     (:func:`~identification.diagnosis_support.retuning`); the nonlinearity tests keep the
-    model's own prediction as their signal."""
+    model's own prediction as their signal. A test counts only where the residual's systematic
+    part costs at least :data:`~identification.diagnosis_support.RELEVANCE` fit points
+    (:func:`~identification.diagnosis_support.systematic_cost`). The model's settling time
+    (:func:`~identification.diagnosis_support.settling_time`) is left out at the start: the free
+    run starts in equilibrium, a record that does not start at rest does not."""
     from dataclasses import replace
 
+    k = int(round(settling_time(model.structure, model.parameters, data) / data.sample_period))
+    k = min(k, len(data) // 4)
     tuning = retuning(model.structure, model.parameters, model.free, data, simulated,
-                      model.covariance)
-    retuned = replace(data, outputs=data.outputs - (tuning["prediction"] - simulated))
-    return gap_significance(_analyse(retuned, simulated, model, roles), data, tuning=tuning)
+                      model.covariance, start=k)
+    part = replace(data, time=data.time[k:], inputs=data.inputs[k:], outputs=data.outputs[k:])
+    y = simulated[k:]
+    retuned = replace(part, outputs=part.outputs - (tuning["prediction"][k:] - y))
+    costs = {o: systematic_cost(part.inputs, part.outputs[:, j], y[:, j])
+             for j, o in enumerate(part.output_names)}
+    gap = gap_significance(_analyse(retuned, y, model, roles), part, tuning=tuning, costs=costs)
+    return {**gap, "transient_s": k * data.sample_period}
 
 
 def _try(model: _Model, candidate: Mapping[str, Any], train: IdentificationData,
@@ -363,6 +381,21 @@ def _refit(structure: AugmentedStructure, model: _Model, train: IdentificationDa
         if not result.message.startswith("model invalid"):
             return result
     raise IdentificationError(f"{structure.name}: {result.message}")
+
+
+def _choose(passing: Sequence[tuple[Trial, _Model, np.ndarray]], folds: int
+            ) -> tuple[Trial, _Model, np.ndarray]:
+    """The accepted candidate among those passing: the largest validation improvement, unless
+    others come within its standard error over the blocked folds (``spread / sqrt(folds)``);
+    the withheld data cannot tell those apart, so the training ``dBIC`` (which charges ``ln N_eff``
+    per parameter: parsimony) decides among them. A mass in the force-sensor path (one parameter)
+    and a compliant mode (three) can both improve a run excited below the mode; the simpler one
+    wins unless the mode is better on the withheld data beyond its uncertainty."""
+    best = max(passing, key=lambda t: t[0].improvement)[0]
+    tolerance = best.fold_spread / math.sqrt(max(folds, 1)) if math.isfinite(best.fold_spread) \
+        else 0.0
+    close = [t for t in passing if t[0].improvement >= best.improvement - tolerance]
+    return min(close, key=lambda t: t[0].delta_bic)
 
 
 def _step(trial: Trial, data: IdentificationData, before: np.ndarray, after: np.ndarray) -> Step:

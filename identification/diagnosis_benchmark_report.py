@@ -78,8 +78,8 @@ def format_markdown(result: BenchmarkResult, png_name: str) -> str:
              "APRBS realisation) per case, diagnosed blind (truth metadata stripped). Wall time "
              f"{s.get('wall_time_s', math.nan):.0f} s.", "",
              "| score | value | cases | goal |", "|---|---|---|---|",
-             f"| top-1 on library effects costing >= {settings.get('strong_fit_points')} fit "
-             f"points | {_pct(s['top1_accuracy'])} | {s['strong_cases']} | >= 90 % |",
+             "| top-1 on library effects costing the model >= "
+             f"{settings.get('strong_fit_points')} fit points | {_pct(s['top1_accuracy'])} | {s['strong_cases']} | >= 90 % |",
              f"| top-1 on all library cases | {_pct(s['top1_accuracy_all_library'])} | "
              f"{s['library_cases']} | |",
              f"| false alarms on `none` (an effect named) | {_pct(s['false_alarm_rate'])} | "
@@ -98,12 +98,15 @@ def format_markdown(result: BenchmarkResult, png_name: str) -> str:
     lines += [f"| {r} | " + " | ".join(str(result.confusion[r].get(c, "")) for c in columns) + " |"
               for r in rows]
     lines += ["", "## Cases", "",
-              "| # | hidden | magnitude | cost [fit pts] | verdict | effects | fit before -> after "
-              "| gap closed | time [s] |", "|---|---|---|---|---|---|---|---|---|"]
+              "| # | hidden | magnitude | cost to the model [fit pts] | signal [fit pts] | verdict "
+              "| effects | fit clean / before -> after | gap closed | time [s] |",
+              "|---|---|---|---|---|---|---|---|---|---|"]
     for o in result.outcomes:
-        fits = ", ".join(f"{k} {o.fit_before[k]:.1f}->{o.fit_after[k]:.1f}" for k in o.fit_before)
+        fits = ", ".join(f"{k} {o.fit_clean.get(k, math.nan):.1f} / {o.fit_before[k]:.1f}->"
+                         f"{o.fit_after[k]:.1f}" for k in o.fit_before)
         lines.append(f"| {o.case.index + 1} | {o.case.label} | {o.case.magnitude:.3g} | "
-                     f"{o.cost:.1f} | {o.verdict} | {', '.join(o.effects)} | {fits} | "
+                     f"{o.cost:.1f} | {o.signal_cost:.1f} | {o.verdict} | {', '.join(o.effects)} "
+                     f"| {fits} | "
                      f"{_pct(o.gap_closed)} | {o.wall_time:.0f} |")
     return "\n".join(lines) + "\n"
 

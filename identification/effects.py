@@ -8,7 +8,8 @@ signatures follow the table of the diagnosis reference:
 ================  =====================================================================
 effect            regressor variants ``phi(t)``
 ================  =====================================================================
-coulomb_friction  ``sign(v)``, ``tanh(v / v_s)`` for a few ``v_s`` (relative to std v)
+coulomb_friction  ``sign(v)``, ``tanh(v / v_s)`` for a few ``v_s`` (relative to std v);
+                  presliding ``(x - play_b(x)) / b`` (a joint that sticks at reversals)
 cubic_stiffness   ``x~^3``, ``x~|x~|`` (``x~ = x - median x``)
 dead_zone         ``dz(u~, b) - u~ = -clip(u~, -b, b)`` of actuators; backlash ``play_b(x) - x``
 input_delay       ``u(t - d) - u(t)`` over delays ``d``
@@ -122,6 +123,22 @@ def _friction(v: np.ndarray, options: RegressorOptions) -> dict[str, Regressor]:
     for w in options.friction_widths:
         out["sign(v)" if w == 0 else f"tanh(v/{w * scale:.3g})"] = (
             np.sign(v) if w == 0 else np.tanh(v / (w * scale)), {"v_s": w * scale})
+    return out
+
+
+def _presliding(x: np.ndarray, options: RegressorOptions) -> dict[str, Regressor]:
+    """Friction that sticks: ``(x - play_b(x)) / b`` in ``[-1, 1]``, the elasto-plastic
+    (presliding) friction law: the force grows with the displacement since the last reversal with
+    the stiffness ``F_f / b`` and saturates at ``F_f`` once the joint slides. A joint driven
+    through a compliance (the pantograph's hinge, moved by the wire through the head suspension)
+    sticks for a while at each reversal, which ``tanh(v / v_s)`` of the nominal velocity misses."""
+    spread = float(np.max(np.abs(_centred(x))))
+    out = {}
+    for w in options.dead_zone_widths:
+        b = 0.5 * w * spread
+        if b > 0:
+            out[f"presliding(position, {b:.3g})"] = ((x - play_operator(x, b)) / b,
+                                                     {"presliding": b})
     return out
 
 
@@ -250,6 +267,8 @@ def build_candidate_regressors(signals: Mapping[str, np.ndarray], sample_period:
     out: dict[str, dict[str, Regressor]] = {"offset": {"constant": (np.ones(n), {})}}
     if velocity is not None:
         out["coulomb_friction"] = _friction(velocity, options)
+        if position is not None:
+            out["coulomb_friction"].update(_presliding(position, options))
     if position is not None:
         x = _centred(position)
         out["cubic_stiffness"] = {"x^3": (x ** 3, {}), "x|x|": (x * np.abs(x), {})}

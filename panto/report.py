@@ -37,14 +37,19 @@ def write_report(summary: Mapping[str, Any], out: str | Path, *, embed: bool = T
     embed : bool
         Embed the images as base64 (default); False links the PNG files instead.
     """
+    from panto.overview import write_overview
+
     out = Path(out)
+    overview = write_overview(out)
     parts = [(f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>panto demo</title>"
              f"<style>{_STYLE}</style></head><body>"),
              "<h1>Pantograph: from the rig to the line (panto demo)</h1>",
              (f"<p>{'Quick' if summary.get('quick') else 'Full'} run, "
              f"{time.strftime('%Y-%m-%d %H:%M')}, {summary.get('wall_time_s', math.nan):.0f} s "
              "on this machine.</p>"),
-             _guarded(_summary_page, summary), _guarded(_steps_table, summary)]
+             _guarded(_summary_page, summary),
+             _image(out, overview.name, embed, "overview: six of the plots below")
+             if overview else "", _guarded(_steps_table, summary)]
     for section in (_rig_section, _video_section, _identification_section, _diagnosis_section,
                     _doe_section, _cosim_section, _failures_section):
         parts.append(_guarded(section, summary, out, embed))

@@ -68,14 +68,17 @@ def test_scores_count_only_strong_effects_and_name_false_alarms():
     assert sum(matrix["none"].values()) == 3
 
 
-def test_gap_closed_is_the_share_of_the_effect_energy_removed():
-    # The effect costs 20 points on F_c alone: normalised energy 0.2^2; removing all of it from a
-    # residual of (0.2^2 + 0.1^2) leaves 0.1^2.
+def test_gap_closed_is_the_share_of_the_gap_to_the_clean_nominal_removed():
+    # Before: F_c residual energy 0.2^2 + 0.1^2 = 0.05; the clean nominal leaves 0.1^2 = 0.01;
+    # an augmented model at 90 % leaves 0.01 too: all of the 0.04 gap removed.
     before = {"F_c": 100 * (1 - math.sqrt(0.05)), "y_cb": 95.0}
     after = {"F_c": 90.0, "y_cb": 95.0}
-    assert gap_closed(before, after, {"F_c": 80.0, "y_cb": 100.0}) == pytest.approx(1.0)
-    assert gap_closed(before, before, {"F_c": 80.0, "y_cb": 100.0}) == pytest.approx(0.0)
-    assert math.isnan(gap_closed(before, after, {"F_c": 100.0, "y_cb": 100.0}))
+    clean = {"F_c": 90.0, "y_cb": 95.0}
+    assert gap_closed(before, after, clean) == pytest.approx(1.0)
+    assert gap_closed(before, before, clean) == pytest.approx(0.0)
+    halfway = {"F_c": 100 * (1 - math.sqrt(0.03)), "y_cb": 95.0}
+    assert gap_closed(before, halfway, clean) == pytest.approx(0.5)
+    assert math.isnan(gap_closed(before, after, before))  # no gap to close
 
 
 @pytest.fixture(scope="module")
@@ -114,13 +117,19 @@ def test_the_cost_of_an_offset_matches_its_analytic_value(offset_outcome):
     # are untouched by a force offset.
     assert outcome.fit_effect["y_cb"] == pytest.approx(100.0)
     analytic = 100.0 * 8.0 / outcome.spread["F_c"]
-    assert outcome.cost == pytest.approx(analytic, rel=0.02)
+    assert outcome.signal_cost == pytest.approx(analytic, rel=0.02)
+    # What it costs the model is the drop from the nominal fitted without the effect, never
+    # more than the signal itself costs (the nominal's preload absorbs part of an offset).
+    drop = max(outcome.fit_clean[o] - outcome.fit_before[o] for o in outcome.fit_clean)
+    assert outcome.cost == pytest.approx(max(drop, 0.0))
+    assert outcome.cost <= outcome.signal_cost + 1.0
     # The outcome is scored from the diagnosis' own fits (whatever it answered).
     assert outcome.predicted == (outcome.effects[0] if outcome.verdict == "effect"
                                  else outcome.verdict)
-    expected = gap_closed(outcome.fit_before, outcome.fit_after, outcome.fit_effect)
-    assert outcome.gap_closed == pytest.approx(expected)
-    assert (outcome.gap_closed == pytest.approx(0.0)) == (outcome.verdict != "effect")
+    expected = gap_closed(outcome.fit_before, outcome.fit_after, outcome.fit_clean)
+    assert outcome.gap_closed == pytest.approx(expected, nan_ok=True)
+    if outcome.verdict != "effect" and math.isfinite(outcome.gap_closed):
+        assert outcome.gap_closed == pytest.approx(0.0)
 
 
 def test_the_files_are_written(offset_outcome, tmp_path):

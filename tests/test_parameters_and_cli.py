@@ -136,6 +136,11 @@ def test_quick_demo_runs_every_step_and_writes_the_report(tmp_path):
     report = (tmp_path / "report.html").read_text()
     assert "EN 50318" in report and "physical-linear" in report
     assert report.count("data:image/png;base64") >= 10
+    # the overview picture gathers the six panels a failed step did not leave out
+    from matplotlib.image import imread
+
+    assert "overview: six of the plots below" in report
+    assert imread(tmp_path / "overview.png").shape[0] > 3 * 4.6 * 90 - 2
 
 
 def test_a_failing_demo_step_is_recorded_and_the_others_still_run(tmp_path, monkeypatch):
