@@ -168,7 +168,7 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
              structure: str | ModelStructure,
              structure_options: Mapping[str, Any] | None = None,
              roles: SignalRoles | None = None, candidates: Sequence[str] = EFFECTS,
-             max_effects: int = 3, max_refits: int = 3, executor: Any = None,
+             max_effects: int = 3, max_refits: int = 5, executor: Any = None,
              progress: Progress | None = None, folds: int = 4,
              max_evaluations: int = 400) -> Diagnosis:
     """Diagnose the gap between a model structure and data (module notes).

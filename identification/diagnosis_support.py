@@ -18,6 +18,7 @@ Formulas (the diagnosis reference, ``identification_and_diagnosis.md``):
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any, Mapping, Sequence
 
@@ -248,7 +249,15 @@ def _output_filter(structure: ModelStructure, parameters: Mapping[str, float], o
 def rank_candidates(model: Any, train: IdentificationData, roles: SignalRoles,
                     candidates: Sequence[str], max_refits: int) -> dict[str, Any]:
     """FROLS ranking per output of the current model's training residual; the top candidates
-    (significant, best ERR over the outputs) with start settings for their augmentation.
+    with start settings for their augmentation.
+
+    The ranking screens, the refit judges: the `max_refits` refits go to the significant
+    candidates first, then to the best of the rest (ERR >= :data:`MIN_ERR`), each ordered by
+    its ERR summed over the outputs (each output's ERR is a share of that output's residual
+    energy; one physical cause should explain the gap in every output it reaches), because an effect
+    the nominal has partly absorbed shows a weak signature on the training residual (its
+    projection on the nominal's sensitivities is removed) yet can still be the one that closes
+    the gap once refitted in the model. Input-side effects count per input.
 
     A regressor is scored as it reaches the output: through the linear OE model's filter, or,
     for any other nominal, through the nominal's own response to the input it enters
@@ -265,6 +274,7 @@ def rank_candidates(model: Any, train: IdentificationData, roles: SignalRoles,
     paths = {} if _output_filter(model.structure, model.parameters, train.output_names[0],
                                  drive) else input_paths(model, train, regressors, y_hat)
     best: dict[str, dict[str, Any]] = {}
+    total: dict[str, float] = {}
     per_output = {}
     for j, output in enumerate(train.output_names):
         target = eps[:, j]
@@ -278,27 +288,50 @@ def rank_candidates(model: Any, train: IdentificationData, roles: SignalRoles,
             regressors = {e: {v: (paths[(e, v)][:, j] if (e, v) in paths else x, setting)
                               for v, (x, setting) in variants.items()}
                           for e, variants in regressors.items()}
+        split = _split_per_input(regressors)
         try:
-            ranking = rank_effects(target, regressors, base=base, sensitivity=sensitivity,
+            ranking = rank_effects(target, split, base=base, sensitivity=sensitivity,
                                    max_steps=3)
         except IdentificationError:
             continue
         per_output[output] = ranking.to_dict()
         for score in ranking.first_step:
-            if not (score.significant and score.err >= 0.01):
+            if not score.err >= MIN_ERR:
                 continue
-            if score.effect not in best or score.err > best[score.effect]["err"]:
-                coefficient = _coefficient(regressors[score.effect][score.variant][0], target,
-                                           base, sensitivity)
+            key = score.effect
+            score = dataclasses.replace(score, effect=score.effect.split("@")[0])
+            total[key] = total.get(key, 0.0) + float(score.err)
+            if key not in best or (score.significant, score.err) > (
+                    best[key]["significant"], best[key]["err"]):
+                coefficient = _coefficient(split[key][score.variant][0], target, base,
+                                           sensitivity)
                 setting = _setting(score, output, coefficient, signals, train, roles, drive)
                 through = equivalent_input(model.structure, score.effect)
                 if through:
                     setting["input_scale"] = float(np.std(train.input(through))) or 1.0
-                best[score.effect] = {
+                best[key] = {
                     "effect": score.effect, "variant": score.variant, "err": float(score.err),
-                    "output": output, "setting": setting}
-    top = sorted(best.values(), key=lambda c: -c["err"])[:max_refits]
-    return {"top": top, "per_output": per_output}
+                    "significant": bool(score.significant), "output": output,
+                    "setting": setting}
+    for key, candidate in best.items():
+        candidate["err_total"] = total[key]
+    top = sorted(best.values(), key=lambda c: (not c["significant"], -c["err_total"]))
+    return {"top": top[:max_refits], "per_output": per_output}
+
+
+#: Smallest error-reduction ratio for a candidate to be refitted at all.
+MIN_ERR = 0.005
+
+
+def _split_per_input(regressors: Mapping[str, Mapping[str, Any]]) -> dict[str, dict[str, Any]]:
+    """Input-side effects as one candidate per input (``actuator_lag@p``): a lag on the pressure
+    and a lag on the slider height are different hypotheses, ranked and refitted separately."""
+    split: dict[str, dict[str, Any]] = {}
+    for effect, variants in regressors.items():
+        for label, (x, setting) in variants.items():
+            where = setting.get("input") if effect in INPUT_SIDE else None
+            split.setdefault(f"{effect}@{where}" if where else effect, {})[label] = (x, setting)
+    return split
 
 
 def _coefficient(x: np.ndarray, target: np.ndarray, base: np.ndarray | None, sensitivity) -> float:
