@@ -78,7 +78,7 @@ class Problem:
 
     def parameters(self, z: np.ndarray) -> dict[str, float]:
         """All parameter values for the transformed free vector `z`."""
-        theta = np.where(self.logarithmic, self.reference * np.exp(np.clip(z, -700, 700)),
+        theta = np.where(self.logarithmic, self.reference * np.exp(np.clip(z, -300, 300)),
                          self.reference + self.scale * z)
         return {**self.base, **dict(zip(self.free, theta.tolist()))}
 
