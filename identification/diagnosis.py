@@ -55,10 +55,11 @@ from scipy import stats
 from identification.augmentations import AugmentedStructure, describe_augmentation
 from identification.base import (IdentificationData, IdentificationError, ModelStructure,
                                  fit_percent)
+from identification.diagnosis_ranking import rank_candidates
 from identification.diagnosis_support import (build_structure, default_roles, effective_samples,
-                                               gap_significance, judge_trial, rank_candidates,
-                                               residuals, retuning, settling_time,
-                                               systematic_cost, where_summary)
+                                               gap_significance, judge_trial, residuals,
+                                               retuning, settling_time, systematic_cost,
+                                               where_summary)
 from identification.effects import EFFECTS, SignalRoles
 from identification.least_squares import fit_least_squares
 from identification.residual_analysis import OutputAnalysis, _jsonable, analyse_residuals
