@@ -35,6 +35,7 @@ Start values come from the FROLS ranking (:mod:`identification.effects`): the va
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any, Mapping
 
@@ -280,9 +281,7 @@ class AugmentedStructure(ModelStructure):
             shape = np.tanh(velocity / width) if width > 0 else np.sign(velocity)
         inputs = np.array(data.inputs, float)
         inputs[:, data.input_names.index(name)] += values[f"{self.effect}:{name}"] * shape
-        shifted = IdentificationData(data.time, inputs, data.outputs, data.input_names,
-                                     data.output_names, data.units, data.source, data.metadata)
-        return self.base.simulate(inner, shifted)
+        return self.base.simulate(inner, dataclasses.replace(data, inputs=inputs))
 
     # --- transforms -----------------------------------------------------------------------
     def _transform_inputs(self, values: Mapping[str, float], data: IdentificationData
@@ -306,8 +305,7 @@ class AugmentedStructure(ModelStructure):
             u = np.clip(u, values[f"saturation:{name}:low"], values[f"saturation:{name}:high"])
         inputs = np.array(data.inputs, float)
         inputs[:, index] = u
-        return IdentificationData(data.time, inputs, data.outputs, data.input_names,
-                                  data.output_names, data.units, data.source, data.metadata)
+        return dataclasses.replace(data, inputs=inputs)
 
     def _signal(self, name: str | None, data: IdentificationData, y: np.ndarray) -> np.ndarray:
         if name in data.input_names:

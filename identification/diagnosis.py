@@ -50,16 +50,14 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
-from scipy import stats
 
 from identification.augmentations import AugmentedStructure, describe_augmentation
 from identification.base import (IdentificationData, IdentificationError, ModelStructure,
                                  fit_percent)
 from identification.diagnosis_ranking import rank_candidates
 from identification.diagnosis_support import (build_structure, default_roles, effective_samples,
-                                               gap_significance, judge_trial, residuals,
-                                               retuning, settling_time, systematic_cost,
-                                               where_summary)
+                                               gap_significance, judge_trial, retuning,
+                                               settling_time, systematic_cost, where_summary)
 from identification.effects import EFFECTS, SignalRoles
 from identification.least_squares import fit_least_squares
 from identification.residual_analysis import OutputAnalysis, _jsonable, analyse_residuals
@@ -220,11 +218,10 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
     fit_options = {"executor": executor, "max_evaluations": max_evaluations}
     say(f"diagnose: nominal {nominal.name}, {len(free)} free parameters, {len(train)} training "
         f"and {len(validation)} validation samples, outputs {list(train.output_names)}")
-    result = fit_least_squares(nominal, train.select_outputs(_fitted(nominal, train)), free=free,
-                               progress=_indent(progress), **fit_options)
+    result = fit_nominal(nominal, free, train, progress=_indent(progress), **fit_options)
     model = _Model(nominal, dict(result.parameters), tuple(free), dict(result.std),
                    np.asarray(result.covariance, float))
-    say(f"diagnose: nominal fit on training: " + _fits(result.fit))
+    say("diagnose: nominal fit on training: " + _fits(result.fit))
     before = _simulate(model, validation)
     analysis_before = _analyse(validation, before, model, roles)
     gap = _gap(model, validation, before, roles)
@@ -273,6 +270,14 @@ def _indent(progress: Progress | None) -> Progress | None:
 
 def _fits(fits: Mapping[str, float]) -> str:
     return ", ".join(f"{k} {v:.2f} %" for k, v in fits.items())
+
+
+def fit_nominal(nominal: ModelStructure, free: Sequence[str], train: IdentificationData,
+                **options: Any):
+    """The nominal's output-error fit on the training run, as :func:`diagnose` makes it
+    (`options` go to :func:`~identification.least_squares.fit_least_squares`)."""
+    return fit_least_squares(nominal, train.select_outputs(_fitted(nominal, train)), free=free,
+                             **options)
 
 
 def _fitted(structure: ModelStructure, data: IdentificationData) -> tuple[str, ...]:
@@ -324,7 +329,6 @@ def _gap(model: _Model, data: IdentificationData, simulated: np.ndarray,
     from dataclasses import replace
 
     k = int(round(settling_time(model.structure, model.parameters, data) / data.sample_period))
-    k = min(k, len(data) // 4)
     tuning = retuning(model.structure, model.parameters, model.free, data, simulated,
                       model.covariance, start=k)
     part = replace(data, time=data.time[k:], inputs=data.inputs[k:], outputs=data.outputs[k:])
@@ -438,4 +442,4 @@ def _summary(verdict: str, effects: Sequence[str], before: Mapping[str, float],
     return f"{' then '.join(effects)}: validation fit {fits}{rest}"
 
 
-__all__ = ["diagnose", "Diagnosis", "Trial", "Step", "effective_samples"]
+__all__ = ["diagnose", "fit_nominal", "Diagnosis", "Trial", "Step", "effective_samples"]

@@ -253,11 +253,11 @@ def clean_fit(structure: str, train: Any, validation: Any) -> dict[str, float]:
     the reference for the effect's *cost to the model* and for the gap closed (module notes).
     """
     from identification.base import fit_percent
+    from identification.diagnosis import fit_nominal
     from identification.diagnosis_support import build_structure
-    from identification.least_squares import fit_least_squares
 
     nominal, free = build_structure(structure, train, {})
-    result = fit_least_squares(nominal, train, free=free, max_evaluations=400)
+    result = fit_nominal(nominal, free, train, max_evaluations=400)
     simulated = nominal.simulate(result.parameters, validation)
     return {o: float(fit_percent(validation.outputs[:, j], simulated[:, j]))
             for j, o in enumerate(validation.output_names)}

@@ -79,7 +79,8 @@ def format_markdown(result: BenchmarkResult, png_name: str) -> str:
              f"{s.get('wall_time_s', math.nan):.0f} s.", "",
              "| score | value | cases | goal |", "|---|---|---|---|",
              "| top-1 on library effects costing the model >= "
-             f"{settings.get('strong_fit_points')} fit points | {_pct(s['top1_accuracy'])} | {s['strong_cases']} | >= 90 % |",
+             f"{settings.get('strong_fit_points')} fit points | {_pct(s['top1_accuracy'])} | "
+             f"{s['strong_cases']} | >= 90 % |",
              f"| top-1 on all library cases | {_pct(s['top1_accuracy_all_library'])} | "
              f"{s['library_cases']} | |",
              f"| false alarms on `none` (an effect named) | {_pct(s['false_alarm_rate'])} | "

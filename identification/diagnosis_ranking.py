@@ -181,7 +181,6 @@ def input_paths(model: Any, data: IdentificationData,
     an output only through the model's dynamics; scored raw, a lag of the bellow pressure would
     look like nothing the force residual holds. ``h`` is 1 % of the input's spread over the
     regressor's. Empty when the simulations would exceed :data:`PATH_BUDGET` (one timed first)."""
-
     structure, parameters = model.structure, model.parameters
     jobs = []
     for effect, variants in regressors.items():
@@ -202,10 +201,8 @@ def input_paths(model: Any, data: IdentificationData,
         h = 0.01 * (float(np.std(data.inputs[:, index])) or 1.0) / spread
         inputs = np.array(data.inputs, float)
         inputs[:, index] += h * x
-        moved = IdentificationData(data.time, inputs, data.outputs, data.input_names,
-                                   data.output_names, data.units, data.source, data.metadata)
         try:
-            y1, _ = residuals(structure, parameters, moved)
+            y1, _ = residuals(structure, parameters, dataclasses.replace(data, inputs=inputs))
         except (IdentificationError, ValueError, ArithmeticError):
             continue
         out[key] = (y1 - y_hat) / h

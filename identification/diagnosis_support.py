@@ -1,10 +1,10 @@
 """The pieces of :func:`identification.diagnosis.diagnose`: structures by name, signal roles, the
 acceptance tests and the gap's significance (the candidate ranking on the training residual is in
-:mod:`identification.diagnosis_ranking`)
-(the model error model is tested only where the input carries power, within 40 dB of its peak:
-beyond the excited band its estimate is an extrapolation; the gap is tested on the validation
-residual with the nominal parameters' sensitivities projected out, and the retuning this takes
-must agree with the training estimate, :func:`retuning`).
+:mod:`identification.diagnosis_ranking`). The model error model is tested only where the input
+carries power, within 40 dB of its peak: beyond the excited band its estimate is an
+extrapolation. The gap is tested on the validation residual with the nominal parameters'
+sensitivities projected out, and the retuning this takes must agree with the training estimate
+(:func:`retuning`).
 
 Formulas (the diagnosis reference, ``identification_and_diagnosis.md``):
 
@@ -19,6 +19,7 @@ Formulas (the diagnosis reference, ``identification_and_diagnosis.md``):
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any, Mapping, Sequence
 
@@ -27,7 +28,7 @@ from scipy import stats
 
 from identification.base import (IdentificationData, IdentificationError, IdentificationResult,
                                  ModelStructure, fit_percent)
-from identification.effects import (SignalRoles)
+from identification.effects import SignalRoles
 from identification.residual_analysis import excited_band
 
 #: Parameter of an effect whose significance is tested (default: its first parameter).
@@ -392,10 +393,6 @@ def where_summary(analysis: Sequence[Any], data: IdentificationData) -> dict[str
     return out
 
 
-__all__ = ["build_structure", "default_roles", "residuals", "effective_samples", "sensitivities",
-           "retuning", "judge_trial", "gap_significance", "where_summary"]
-
-
 # --- relevance of a gap and the initial transient (issue 8) ---------------------------------
 
 RELEVANCE = 2.0
@@ -469,9 +466,8 @@ def settling_time(structure: ModelStructure, parameters: Mapping[str, float],
         step = np.tile(base, (n, 1))
         step[1:, i] += float(np.std(u[:, i])) or 1.0
         try:
-            y, _ = residuals(structure, parameters, IdentificationData(
-                data.time, step, np.zeros((n, len(data.output_names))), data.input_names,
-                data.output_names, data.units))
+            y, _ = residuals(structure, parameters, dataclasses.replace(
+                data, inputs=step, outputs=np.zeros((n, len(data.output_names)))))
         except (IdentificationError, ValueError, ArithmeticError, TypeError):
             return 0.0
         change = y - y[0]
@@ -484,4 +480,6 @@ def settling_time(structure: ModelStructure, parameters: Mapping[str, float],
     return float(min(worst, int(longest * n)) * data.sample_period)
 
 
-__all__ += ["systematic_cost", "settling_time", "RELEVANCE"]
+__all__ = ["build_structure", "default_roles", "residuals", "effective_samples", "sensitivities",
+           "retuning", "judge_trial", "gap_significance", "where_summary", "systematic_cost",
+           "settling_time", "RELEVANCE"]

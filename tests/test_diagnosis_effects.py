@@ -116,3 +116,18 @@ def test_parsimony_decides_between_candidates_the_withheld_data_cannot_tell_apar
     clear = _trial("extra_mode", 4.0, 0.8, -230.0)  # better beyond its standard error
     assert _choose([(simple, None, None), (clear, None, None)], folds)[0].effect == "extra_mode"
     assert math.isclose(_choose([(rich, None, None)], folds)[0].improvement, 2.2)
+
+
+def test_input_side_effects_are_separate_candidates_per_input():
+    """A lag on p and a lag on eta are different hypotheses: ranked (and refitted) apart, so the
+    better-scoring one on one input cannot hide the other; output-side effects stay whole."""
+    from identification.diagnosis_ranking import _split_per_input
+
+    x = np.zeros(4)
+    regressors = {"actuator_lag": {"lag(eta, 0.08 s)": (x, {"input": "eta"}),
+                                   "lag(p, 0.02 s)": (x, {"input": "p"}),
+                                   "lag(p, 0.3 s)": (x, {"input": "p"})},
+                  "offset": {"constant": (x, {})}}
+    split = _split_per_input(regressors)
+    assert set(split) == {"actuator_lag@eta", "actuator_lag@p", "offset"}
+    assert set(split["actuator_lag@p"]) == {"lag(p, 0.02 s)", "lag(p, 0.3 s)"}
