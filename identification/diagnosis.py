@@ -30,7 +30,10 @@ causes it, and how far the gap shrinks once that effect is in the model (issue 8
    magnitude parameter is significant, ``|theta| / sigma_theta > 3``, ``sigma_theta`` inflated by
    ``sqrt(N / N_eff)`` for coloured residuals; (c) on the validation run the free-run fit (mean
    over outputs) improves by more than the spread of the improvement across ``folds`` blocked
-   folds (its standard error ``std / sqrt(folds)``). The passing candidate with the largest
+   folds (its standard error ``std / sqrt(folds)``), and no output gets worse beyond its own
+   fold standard error (``t_{0.975}`` of it, at least 0.2 points). A model the refit leaves
+   invalid on the validation run (no static equilibrium at its operating point) is rejected.
+   The passing candidate with the largest
    validation improvement is accepted, unless others come within that improvement's standard
    error: then the lowest ``dBIC`` among them (parsimony, :func:`_choose`); the search repeats on
    what remains (``max_effects``).
@@ -60,7 +63,8 @@ from identification.diagnosis_support import (build_structure, default_roles, ef
                                                settling_time, systematic_cost, where_summary)
 from identification.effects import EFFECTS, SignalRoles
 from identification.least_squares import fit_least_squares
-from identification.residual_analysis import OutputAnalysis, _jsonable, analyse_residuals
+from identification.residual_analysis import OutputAnalysis, analyse_residuals
+from identification.residual_energy import _jsonable
 
 Progress = Callable[[str], None]
 
@@ -345,6 +349,7 @@ def _try(model: _Model, candidate: Mapping[str, Any], train: IdentificationData,
          fit_options: Mapping[str, Any], say: Progress) -> tuple[Trial, _Model, np.ndarray]:
     """Refit the nominal with one candidate and judge it."""
     effect = candidate["effect"]
+    stage = "refit failed"
     try:
         structure = AugmentedStructure(model.structure, effect, roles, candidate["setting"])
         free = tuple(model.free) + tuple(p for p in structure.effect_parameters
@@ -352,14 +357,14 @@ def _try(model: _Model, candidate: Mapping[str, Any], train: IdentificationData,
         result = _refit(structure, model, train, free, fit_options)
         new = _Model(structure, dict(result.parameters), free, dict(result.std),
                      np.asarray(result.covariance, float))
+        stage = "the refitted model is invalid on the validation run"
         simulated = _simulate(new, validation)
         trial = judge_trial(candidate, structure, result, model, train, validation, current,
                             simulated, folds)
     except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError) as error:
-        say(f"  {effect}: refit failed ({error})")
+        say(f"  {effect}: rejected: {stage} ({error})")
         trial = Trial(effect, candidate["variant"], candidate["err"], effect, {}, {}, math.nan,
-                      math.nan, math.nan, (), math.nan, {}, {}, False, ("refit failed",),
-                      str(error))
+                      math.nan, math.nan, (), math.nan, {}, {}, False, (stage,), str(error))
         return trial, model, current
     trial = Trial(**{**trial, "description": describe_augmentation(structure)})
     say(f"  {effect}: dBIC {trial.delta_bic:.1f}, |theta|/sigma {trial.significance:.1f}, "
@@ -404,7 +409,7 @@ def _choose(passing: Sequence[tuple[Trial, _Model, np.ndarray]], folds: int
 
 
 def _step(trial: Trial, data: IdentificationData, before: np.ndarray, after: np.ndarray) -> Step:
-    from identification.residual_analysis import energy_by_band, energy_by_segment
+    from identification.residual_energy import energy_by_band, energy_by_segment
 
     fit_before, fit_after = _fit(data, before), _fit(data, after)
     removed, bands, segments = {}, {}, {}

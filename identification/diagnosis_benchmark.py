@@ -133,7 +133,7 @@ class BenchmarkResult:
     settings: Mapping[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
-        from identification.residual_analysis import _jsonable
+        from identification.residual_energy import _jsonable
 
         return _jsonable({"scores": dict(self.scores), "confusion": dict(self.confusion),
                           "settings": dict(self.settings),

@@ -16,13 +16,12 @@ from pathlib import Path
 import numpy as np
 
 from identification.residual_analysis import (
-    BandEnergy,
     CrossCorrelationTest,
     ErrorModel,
     OutputAnalysis,
-    SegmentEnergy,
     WhitenessTest,
 )
+from identification.residual_energy import BandEnergy, SegmentEnergy
 
 
 def _figure(rows: int = 1, height: float = 3.2):

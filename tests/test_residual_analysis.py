@@ -16,12 +16,14 @@ from identification.residual_analysis import (
     check_whiteness,
     cross_correlation,
     detect_nonlinear_lines,
+    excited_lines,
+    fit_error_model,
+)
+from identification.residual_energy import (
     energy_by_band,
     energy_by_condition,
     energy_by_segment,
     energy_by_velocity,
-    excited_lines,
-    fit_error_model,
 )
 
 DT = 0.01
