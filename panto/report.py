@@ -50,9 +50,9 @@ def write_report(summary: Mapping[str, Any], out: str | Path, *, embed: bool = T
              _guarded(_summary_page, summary),
              _image(out, overview.name, embed, "overview: six of the plots below")
              if overview else "", _guarded(_steps_table, summary)]
-    for section in (_rig_section, _video_section, _identification_section, _diagnosis_section,
-                    _doe_section, _cosim_section, _failures_section):
-        parts.append(_guarded(section, summary, out, embed))
+    for title, key, body in _SECTIONS:
+        parts.append(_guarded(_section, summary, out, embed, title, key, body))
+    parts.append(_guarded(_failures_section, summary, out, embed))
     parts.append("</body></html>")
     path = out / "report.html"
     path.write_text("\n".join(parts), encoding="utf-8")
@@ -64,8 +64,17 @@ def _guarded(section: Any, *args: Any) -> str:
     try:
         return section(*args)
     except Exception as error:  # noqa: BLE001 - a malformed entry must not lose the report
-        return (f"<p class='failed'>({_e(section.__name__.strip('_'))}: cannot show "
+        name = args[-1].__name__ if section is _section else section.__name__
+        return (f"<p class='failed'>({_e(name.strip('_'))}: cannot show "
                 f"{type(error).__name__}: {_e(error)})</p>")
+
+
+def _section(summary: Mapping[str, Any], out: Path, embed: bool, title: str, key: str,
+             body: Any) -> str:
+    """One step's section: its heading, then its body, or why the step has no results."""
+    missing = _missing(summary, key)
+    parts = [missing] if missing else body(summary[key], out, embed)
+    return "\n".join([f"<h2>{title}</h2>", *parts])
 
 
 # --- building blocks ----------------------------------------------------------------------------
@@ -223,12 +232,8 @@ def _steps_table(summary: Mapping[str, Any]) -> str:
 
 # --- the sections --------------------------------------------------------------------------------
 
-def _rig_section(summary: Mapping[str, Any], out: Path, embed: bool) -> str:
-    parts = ["<h2>1-2. FMUs and the rig campaign: trajectories</h2>"]
-    missing = _missing(summary, "rig")
-    if missing:
-        return "\n".join(parts + [missing])
-    rig = summary["rig"]
+def _rig_section(rig: Mapping[str, Any], out: Path, embed: bool) -> list[str]:
+    parts = []
     rows = [(k, v["profile"], f"{v['duration_s']:g}", v["folder"], f"{v['wall_s']:.1f}")
             for k, v in rig["runs"].items()]
     parts.append(table(("run", "profile", "duration [s]", "folder", "wall [s]"), rows))
@@ -236,15 +241,11 @@ def _rig_section(summary: Mapping[str, Any], out: Path, embed: bool) -> str:
                  "the measured inputs: the gap before any fitting.</p>")
     for label, plot in rig["plots"].items():
         parts.append(_image(out, plot, embed, f"{label} run"))
-    return "\n".join(parts)
+    return parts
 
 
-def _video_section(summary: Mapping[str, Any], out: Path, embed: bool) -> str:
-    parts = ["<h2>2. Camera video: tracking and synchronisation</h2>"]
-    missing = _missing(summary, "video")
-    if missing:
-        return "\n".join(parts + [missing])
-    video = summary["video"]
+def _video_section(video: Mapping[str, Any], out: Path, embed: bool) -> list[str]:
+    parts = []
     camera = video["camera"]
     parts.append(f"<p>The synthetic camera films {camera['window_s']:g} s of each run at "
                  f"{camera['scale']:g}× the 1920×1080 resolution (rendering full HD costs about "
@@ -259,15 +260,11 @@ def _video_section(summary: Mapping[str, Any], out: Path, embed: bool) -> str:
                         "video − laser RMS [mm]", "merged dataset"), rows))
     for label, run in video["runs"].items():
         parts.append(_image(out, run["sync_plot"], embed, f"{label}: LED correlation"))
-    return "\n".join(parts)
+    return parts
 
 
-def _identification_section(summary: Mapping[str, Any], out: Path, embed: bool) -> str:
-    parts = ["<h2>3. Identification: fit table, Pareto front, eigenvalues</h2>"]
-    missing = _missing(summary, "identification")
-    if missing:
-        return "\n".join(parts + [missing])
-    ident = summary["identification"]
+def _identification_section(ident: Mapping[str, Any], out: Path, embed: bool) -> list[str]:
+    parts = []
     physical = ident["physical"]
     parts.append(markdown_table(ident["comparison_markdown"]))
     parts.append(_image(out, ident["plots"]["comparison"], embed, "fits per structure"))
@@ -292,15 +289,11 @@ def _identification_section(summary: Mapping[str, Any], out: Path, embed: bool) 
                      f"{_e(sensitivity['ranking'][:4])}.</p>")
         parts.append(_image(out, sensitivity["plot"], embed,
                             "eigenvalue sensitivity (thesis Fig. 4.9)"))
-    return "\n".join(parts)
+    return parts
 
 
-def _diagnosis_section(summary: Mapping[str, Any], out: Path, embed: bool) -> str:
-    parts = ["<h2>4. Sim-to-real diagnosis</h2>"]
-    missing = _missing(summary, "diagnosis")
-    if missing:
-        return "\n".join(parts + [missing])
-    diagnosis = summary["diagnosis"]
+def _diagnosis_section(diagnosis: Mapping[str, Any], out: Path, embed: bool) -> list[str]:
+    parts = []
     parts.append(f"<p>{_e(diagnosis['summary'])}</p>")
     rows = [(o, _number(diagnosis["fit_before"][o]), _number(diagnosis["fit_after"][o]),
              _number(None if diagnosis["gap_closed"].get(o) is None
@@ -311,15 +304,11 @@ def _diagnosis_section(summary: Mapping[str, Any], out: Path, embed: bool) -> st
     parts.append(f"<p>Full diagnosis report: <a href='{_e(diagnosis['report'])}'>"
                  f"{_e(diagnosis['report'])}</a></p>")
     parts.append(_image(out, diagnosis["plot"], embed, "validation run: before and after"))
-    return "\n".join(parts)
+    return parts
 
 
-def _doe_section(summary: Mapping[str, Any], out: Path, embed: bool) -> str:
-    parts = ["<h2>5. The next rig run (design of experiments)</h2>"]
-    missing = _missing(summary, "doe")
-    if missing:
-        return "\n".join(parts + [missing])
-    doe = summary["doe"]
+def _doe_section(doe: Mapping[str, Any], out: Path, embed: bool) -> list[str]:
+    parts = []
     parts.append(f"<p>{doe['criterion']}-optimal motor position and pressure demand for the "
                  f"physical model's parameters ({_e(doe['parameters_from'])} values), "
                  f"{doe['duration_s']:g} s, as a rig profile: "
@@ -330,15 +319,11 @@ def _doe_section(summary: Mapping[str, Any], out: Path, embed: bool) -> str:
     parts.append(table(("parameter", "value", "std designed", "std APRBS", "ratio"), rows))
     for plot in doe["plots"]:
         parts.append(_image(out, plot, embed))
-    return "\n".join(parts)
+    return parts
 
 
-def _cosim_section(summary: Mapping[str, Any], out: Path, embed: bool) -> str:
-    parts = ["<h2>6. The identified pantograph on the line: contact force</h2>"]
-    missing = _missing(summary, "cosim")
-    if missing:
-        return "\n".join(parts + [missing])
-    cosim = summary["cosim"]
+def _cosim_section(cosim: Mapping[str, Any], out: Path, embed: bool) -> list[str]:
+    parts = []
     parts.append(f"<p>{_e(cosim['line'])} line at {cosim['speed_kmh']:g} km/h, the Pantograph "
                  f"FMU with the {_e(cosim['parameters_from'])} parameters, bellow pressure "
                  f"{cosim['pressure_bar']:.2f} bar (static contact force "
@@ -349,7 +334,7 @@ def _cosim_section(summary: Mapping[str, Any], out: Path, embed: bool) -> str:
     parts.append(_cosim_table(cosim))
     for plot in cosim["plots"]:
         parts.append(_image(out, plot, embed))
-    return "\n".join(parts)
+    return parts
 
 
 def _failures_section(summary: Mapping[str, Any], out: Path, embed: bool) -> str:
@@ -361,3 +346,13 @@ def _failures_section(summary: Mapping[str, Any], out: Path, embed: bool) -> str
         parts.append(f"<h3 class='failed'>{_e(step['title'])}</h3><p>{_e(step['message'])}</p>"
                      f"<pre>{_e(step.get('traceback', ''))}</pre>")
     return "\n".join(parts)
+
+
+#: The report's sections after the summary: heading, the summary's key, the body builder.
+_SECTIONS = (("1-2. FMUs and the rig campaign: trajectories", "rig", _rig_section),
+             ("2. Camera video: tracking and synchronisation", "video", _video_section),
+             ("3. Identification: fit table, Pareto front, eigenvalues", "identification",
+              _identification_section),
+             ("4. Sim-to-real diagnosis", "diagnosis", _diagnosis_section),
+             ("5. The next rig run (design of experiments)", "doe", _doe_section),
+             ("6. The identified pantograph on the line: contact force", "cosim", _cosim_section))
