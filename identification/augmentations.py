@@ -13,7 +13,8 @@ Output side (added to one output, the *target*)
     ``offset``         ``y + c``;
     ``sensor_inertia`` ``F - m_s a``: a mass ``m_s`` between the structure and the force sensor
                        (the rig's aluminium bar: ``F_sensor = F_c - m_bar a_bar``), ``a`` the
-                       zero-phase differentiated acceleration of the position role;
+                       acceleration of the sensor's side (``roles.sensor_position``, the bar's
+                       ``eta``; :func:`~identification.effects.sensor_acceleration`);
     ``extra_mode``     ``y + g (H - 1) w~``, ``H = w_0^2 / (s^2 + 2 zeta w_0 s + w_0^2)`` (Tustin)
                        an unmodelled compliant mode (support resonance) driven by ``w``
                        (gain ``g``, frequency ``f_0`` [Hz], damping ``zeta``).
@@ -21,8 +22,13 @@ Inside the dynamics
     the nominal's own parameters when it has them: the nonlinear pantograph (``physical``):
     ``coulomb_friction -> T_f`` (hinge friction torque), ``cubic_stiffness -> k_c3`` (head
     suspension), ``contact_loss -> unilateral_contact = 1`` (a switch: no new parameter);
+    the linearised pantograph (``physical-linear``) and the two-/three-mass oscillators: their
+    carbon contact made unilateral, a switched pair of linear models in contact and in flight
+    (:mod:`identification.unilateral_contact`; no new parameter);
     an effect acting where an input acts, as that input's equivalent (:data:`EQUIVALENT_INPUTS`:
-    the linearised pantograph's hinge friction as a pressure ``p + c tanh(v / v_s)``);
+    the linearised pantograph's hinge friction as a pressure: Coulomb's set-valued law
+    stepped with the linear model, :func:`stick_slip_run`, so the joint sticks while the
+    friction can hold it; other nominals ``p + c tanh(v / v_s)`` from a first pass);
     a nominal with ``with_effect`` (the linear OE model: a feedback term ``c phi(y)`` as an extra
     input of its dynamics; the rigid body: ``F_c tanh(q'/v_s)``);
     otherwise a quasi-static additive term on the force (or target) output:
@@ -43,7 +49,8 @@ import numpy as np
 from scipy import signal as sps
 
 from identification.base import IdentificationData, IdentificationError, ModelStructure
-from identification.effects import EFFECTS, SignalRoles, play_operator
+from identification.effects import (EFFECTS, SignalRoles, play_operator, sensor_acceleration,
+                                    sensor_signal)
 from identification.rigid_body import motion
 
 INPUT_SIDE = ("input_delay", "actuator_lag", "dead_zone", "saturation")
@@ -68,6 +75,24 @@ def _native(nominal: ModelStructure, effect: str) -> str | None:
 
 def _switch(nominal: ModelStructure, effect: str) -> str | None:
     return NATIVE_SWITCHES.get(nominal.name, {}).get(effect)
+
+
+def _unilateral(nominal: ModelStructure) -> ModelStructure | None:
+    """``contact_loss`` inside a linear(ised) pantograph: its carbon contact made unilateral, a
+    switched linear model (:class:`identification.unilateral_contact.UnilateralContact`), or None
+    when `nominal` has no such linear contact element. An augmented nominal whose effect acts
+    outside the dynamics (input or output side, equivalent input) is rebuilt around the
+    unilateral form of its inner structure: the head's flight is a property of the dynamics, which
+    the other effects act on from outside."""
+    from identification.unilateral_contact import UnilateralContact, supports_unilateral
+
+    if isinstance(nominal, AugmentedStructure):
+        if nominal.mode not in ("wrapper", "equivalent"):
+            return None
+        inner = _unilateral(nominal.nominal_structure)
+        return None if inner is None else AugmentedStructure(inner, nominal.effect, nominal.roles,
+                                                             nominal.setting)
+    return UnilateralContact(nominal) if supports_unilateral(nominal) else None
 
 
 def equivalent_input(nominal: ModelStructure, effect: str) -> str | None:
@@ -135,8 +160,10 @@ class AugmentedStructure(ModelStructure):
             self._add(name, start, (-max(100 * abs(start), 10 * size),
                                     max(100 * abs(start), 10 * size)))
             width = float(self.setting.get("presliding", 0.0) or 0.0)
-            if width > 0:
+            if width > 0 and _state_space(nominal) is None:  # the set-valued law sticks itself
                 self._add(f"{effect}:presliding", width, (0.05 * width, 20.0 * width))
+        elif effect == "contact_loss" and (unilateral := _unilateral(nominal)) is not None:
+            self.mode, self.base = "inside", unilateral
         elif effect in INSIDE + ("offset",) and _has_inside_form(nominal, effect):
             self.mode = "inside"
             self.base = nominal.with_effect(effect, self.setting)
@@ -270,6 +297,11 @@ class AugmentedStructure(ModelStructure):
         sticks, ``u + c (x - play_b(x)) / b`` (elasto-plastic friction, ``b`` fitted; a first-order
         correction of the feedback: the effect barely moves the reversals)."""
         name = equivalent_input(self.nominal_structure, self.effect)
+        level = abs(values[f"{self.effect}:{name}"])
+        if _state_space(self.base) is not None:  # a presliding width given is not its own
+            inner = {k: v for k, v in inner.items() if not k.startswith(f"{self.effect}:")}
+            return _through_wrappers(self.base, inner, data, lambda structure, parameters, run:
+                                     stick_slip_run(structure, parameters, run, name, level))
         first = np.asarray(self.base.simulate(inner, data), float)
         if f"{self.effect}:presliding" in values:
             x = self._signal(self.roles.position, data, first)
@@ -328,7 +360,9 @@ class AugmentedStructure(ModelStructure):
         if effect == "offset":
             y[:, target] += values[f"offset:{s['output']}"]
         elif effect == "sensor_inertia":
-            y[:, target] -= values[f"sensor_inertia:{self._force()}"] * self._motion(data, y)[1]
+            sensor = sensor_signal(self.roles, tuple(data.input_names) + tuple(self.output_names))
+            acceleration = sensor_acceleration(self._signal(sensor, data, y), data.sample_period)
+            y[:, target] -= values[f"sensor_inertia:{self._force()}"] * acceleration
         elif effect == "extra_mode":
             drive = self._signal(s.get("drive") or self._input(), data, y)
             y[:, target] += values["extra_mode:gain"] * mode_response(
@@ -349,6 +383,66 @@ class AugmentedStructure(ModelStructure):
             y[:, target] = np.clip(y[:, target], values[f"saturation:{signal}:low"],
                                    values[f"saturation:{signal}:high"])
         return y
+
+
+def _state_space(structure: ModelStructure) -> ModelStructure | None:
+    """The linear state-space nominal (``linear_model``, ``model_inputs``: the linearised
+    pantograph) under input- and output-side wrappers, or None."""
+    while isinstance(structure, AugmentedStructure):
+        if structure.mode != "wrapper":
+            return None
+        structure = structure.base
+    return structure if hasattr(structure, "linear_model") and \
+        hasattr(structure, "model_inputs") else None
+
+
+def _through_wrappers(structure: ModelStructure, parameters: Mapping[str, float],
+                      data: IdentificationData, core) -> np.ndarray:
+    """Simulate `structure` with ``core(innermost, parameters, data)`` in place of its innermost
+    nominal's free run; the wrappers' input and output transforms applied around it."""
+    if not isinstance(structure, AugmentedStructure):
+        return np.asarray(core(structure, parameters, data), float)
+    own = {k: float(v) for k, v in parameters.items() if k in structure._bounds}
+    inner = {k: v for k, v in parameters.items() if k not in structure._bounds}
+    values = {**structure._starts, **own}
+    if structure.effect in INPUT_SIDE and not structure._on_output():
+        return _through_wrappers(structure.base, inner,
+                                 structure._transform_inputs(values, data), core)
+    y = np.array(_through_wrappers(structure.base, inner, data, core), float)
+    return structure._transform_outputs(values, data, y)
+
+
+def stick_slip_run(structure: Any, parameters: Mapping[str, float], data: IdentificationData,
+                   input_name: str, level: float) -> np.ndarray:
+    """Free run of a linearised mechanism with Coulomb friction ``|f| <= level`` on its first
+    coordinate (the pantograph's lower-arm hinge ``phi1``), in units of the input `input_name`
+    whose generalised force acts on that coordinate (the bellow pressure: ``T_f / k_p`` [bar]).
+
+    Coulomb's set-valued law stepped with the exact discretisation of the model
+    (``x[k+1] = Phi x[k] + drive[k] + Gamma_a f[k]``, the friction held over the step; Moreau's
+    time stepping, Acary & Brogliato, *Numerical Methods for Nonsmooth Dynamical Systems*, 2008,
+    ch. 10): the friction that would stop the joint at the end of the step,
+    ``f* = -v_free / (Gamma_a)_v``, is applied when ``|f*| <= level`` (the joint sticks), else
+    ``level sign(f*)`` (it slides against its motion). The two-pass form ``c tanh(v / v_s)`` on
+    the friction-free velocity does not know when the joint sticks. Measured on the virtual test
+    bed (20 N m hinge, 40 s APRBS runs at 50 Hz, nominal refitted with the effect): the withheld
+    run's force fit goes from 89.2 % to 93.4 % with the two-pass form and to 96.1 % with this law
+    (fitted 0.066 bar, truth 20 / 260 = 0.077 bar); the clean rig gives 98.7 %, the nonlinear
+    model with the true torque 97.8 % (the rest is the linearisation)."""
+    model = structure.discrete_model(parameters, data)
+    column = model.gamma0[:, list(structure.input_names).index(input_name)]
+    joint = len(model.x_start) // 2  # states (q, q'): the velocity of the first coordinate
+    gain = float(column[joint])
+    x = model.x_start
+    states = np.empty((len(model.du), len(x)))
+    states[0] = x
+    with np.errstate(over="ignore", invalid="ignore"):
+        for k in range(len(model.drive)):
+            free = model.phi @ x + model.drive[k]
+            f = -free[joint] / gain if gain != 0.0 else 0.0
+            x = free + column * min(level, max(-level, f))
+            states[k + 1] = x
+    return model.outputs(states, f"{structure.name} with friction")
 
 
 def mode_response(w: np.ndarray, frequency: float, damping: float, sample_period: float) -> np.ndarray:
@@ -374,4 +468,4 @@ def describe_augmentation(structure: AugmentedStructure) -> str:
 
 __all__ = ["AugmentedStructure", "mode_response", "describe_augmentation", "INPUT_SIDE",
            "OUTPUT_SIDE", "INSIDE", "NATIVE_PARAMETERS", "NATIVE_SWITCHES", "EQUIVALENT_INPUTS",
-           "equivalent_input"]
+           "equivalent_input", "stick_slip_run"]

@@ -16,7 +16,8 @@ from identification.augmentations import INPUT_SIDE, equivalent_input
 from identification.base import IdentificationData, IdentificationError, ModelStructure
 from identification.diagnosis_support import residuals, sensitivities
 from identification.effects import (SignalRoles, build_candidate_regressors, filter_sensitivity,
-                                    name_signals, rank_effects)
+                                    name_signals, rank_effects, sensor_acceleration,
+                                    sensor_signal)
 
 # --- the ranking on the training residual -----------------------------------------------------
 
@@ -149,10 +150,10 @@ def _setting(score: Any, output: str, coefficient: float, signals: Mapping[str, 
     if position is not None:
         setting["centre"] = float(np.median(position))
         setting["position_scale"] = float(np.std(position)) or 1.0
-        from identification.rigid_body import motion
-
-        setting["acceleration_scale"] = float(np.std(motion(position, data.sample_period, 0.4)[1])) \
-            or 1.0
+    sensor = sensor_signal(roles, list(signals))
+    if sensor is not None:  # the acceleration sensor_inertia's mass follows (its bound's scale)
+        setting["acceleration_scale"] = float(np.std(sensor_acceleration(
+            signals[sensor], data.sample_period))) or 1.0
     signal = setting.get("signal") or setting.get("input")
     if score.effect == "dead_zone" and signal in signals:
         setting["centre"] = float(np.median(signals[signal]))

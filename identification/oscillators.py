@@ -33,7 +33,6 @@ Simulation (free run, initial state = static equilibrium at the first input samp
 from __future__ import annotations
 
 import math
-import time as _time
 from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np

@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import math
 from functools import lru_cache
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Mapping, NamedTuple, Sequence
 
 import numpy as np
 
@@ -206,8 +206,11 @@ class PhysicalLinear(_PhysicalBase):
         p = self.parameter_vector(parameters)
         return linearise(p, [float(u0[0]), float(u0[1])], _nominal_start(float(u0[0]), float(u0[1])))
 
-    def simulate(self, parameters: Mapping[str, float], data: IdentificationData) -> np.ndarray:
-        """Free run of the linearised model on `data`'s inputs (module notes)."""
+    def discrete_model(self, parameters: Mapping[str, float], data: IdentificationData
+                       ) -> DiscreteLinear:
+        """The linearisation about the operating point, discretised on `data`'s sample period
+        (``x[k+1] = Phi x[k] + drive[k]``), its start in equilibrium with the first input and the
+        output map of the simulated outputs (module notes)."""
         u = self.model_inputs(parameters, data)
         u0 = u.mean(axis=0) if self.operating_point == "mean" else u[0]
         a, b, c, d, _, y0 = self.linear_model(parameters, u0)
@@ -219,11 +222,34 @@ class PhysicalLinear(_PhysicalBase):
         phi, gamma0, gamma1 = discretise(a, b, data.sample_period, self.hold)
         drive = du[:-1] @ gamma0.T + np.diff(du, axis=0) @ gamma1.T
         rows = self._rows()
+        return DiscreteLinear(phi, gamma0, drive, x_start, du, c[rows], d[rows], y0[rows])
+
+    def simulate(self, parameters: Mapping[str, float], data: IdentificationData) -> np.ndarray:
+        """Free run of the linearised model on `data`'s inputs (module notes)."""
+        model = self.discrete_model(parameters, data)
         with np.errstate(over="ignore", invalid="ignore"):  # an unstable candidate: refused below
-            states = propagate(phi, drive, x_start)
-            y = y0[rows] + states @ c[rows].T + du @ d[rows].T
-        if not np.all(np.isfinite(y)) or np.max(np.abs(np.linalg.eigvals(phi))) > 1.0 + 1e-9:
-            raise IdentificationError(f"{self.name}: unstable linearisation for {dict(parameters)}")
+            states = propagate(model.phi, model.drive, model.x_start)
+        return model.outputs(states, self.name)
+
+
+class DiscreteLinear(NamedTuple):
+    """A discretised linearisation of :class:`PhysicalLinear` on one record."""
+
+    phi: np.ndarray
+    gamma0: np.ndarray
+    drive: np.ndarray
+    x_start: np.ndarray
+    du: np.ndarray
+    c: np.ndarray
+    d: np.ndarray
+    y0: np.ndarray
+
+    def outputs(self, states: np.ndarray, name: str) -> np.ndarray:
+        """``y0 + C x + D du``; refuses an unstable or diverged run."""
+        with np.errstate(over="ignore", invalid="ignore"):
+            y = self.y0 + states @ self.c.T + self.du @ self.d.T
+        if not np.all(np.isfinite(y)) or np.max(np.abs(np.linalg.eigvals(self.phi))) > 1.0 + 1e-9:
+            raise IdentificationError(f"{name}: unstable linearisation")
         return y
 
 
