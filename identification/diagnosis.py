@@ -12,7 +12,8 @@ causes it, and how far the gap shrinks once that effect is in the model (issue 8
    sensitivities projected out: the training fit's estimation error is not a gap), and a gap
    too when that retuning disagrees with the training estimate (``chi2`` of the retuning against
    the two runs' parameter covariances at 1 %); the nominal's settling time is left out at the
-   start (a record that does not start at rest). A test counts only for an output whose
+   start (a record that does not start at rest); a residual whose offset or gain on the
+   prediction drifts over the record is a gap too (``drift_test``). A test counts only for an output whose
    residual's systematic part costs at least ``RELEVANCE`` = 2 fit points (engineering
    relevance, :data:`~identification.diagnosis_support.RELEVANCE`). It is *significant* when,
    for some output, the
@@ -58,8 +59,9 @@ from identification.augmentations import AugmentedStructure, describe_augmentati
 from identification.base import (IdentificationData, IdentificationError, ModelStructure,
                                  fit_percent)
 from identification.diagnosis_ranking import rank_candidates
-from identification.diagnosis_support import (build_structure, default_roles, effective_samples,
-                                               gap_significance, judge_trial, retuning,
+from identification.diagnosis_support import (build_structure, default_roles, drift_test,
+                                               effective_samples, gap_significance, judge_trial,
+                                               retuning,
                                                settling_time, systematic_cost, where_summary)
 from identification.effects import EFFECTS, SignalRoles
 from identification.least_squares import fit_least_squares
@@ -237,6 +239,8 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
     for round_index in range(max_effects):
         remaining = [c for c in candidates if c not in accepted]
         ranking = rank_candidates(model, train, roles, remaining, max_refits)
+        ranking["top"] += _predicted_contact_loss(ranking["top"], remaining, roles, validation,
+                                                  current)
         say(f"diagnose: round {round_index + 1}: ranked on the training residual: " +
             (", ".join(f"{c['effect']} (ERR {c['err']:.3f})" for c in ranking["top"]) or
              "no significant candidate"))
@@ -340,7 +344,10 @@ def _gap(model: _Model, data: IdentificationData, simulated: np.ndarray,
     retuned = replace(part, outputs=part.outputs - (tuning["prediction"][k:] - y))
     costs = {o: systematic_cost(part.inputs, part.outputs[:, j], y[:, j])
              for j, o in enumerate(part.output_names)}
-    gap = gap_significance(_analyse(retuned, y, model, roles), part, tuning=tuning, costs=costs)
+    drift = {o: drift_test(retuned.outputs[:, j] - y[:, j], y[:, j])
+             for j, o in enumerate(part.output_names)}
+    gap = gap_significance(_analyse(retuned, y, model, roles), part, tuning=tuning, costs=costs,
+                           drift=drift)
     return {**gap, "transient_s": k * data.sample_period}
 
 
@@ -358,7 +365,15 @@ def _try(model: _Model, candidate: Mapping[str, Any], train: IdentificationData,
         new = _Model(structure, dict(result.parameters), free, dict(result.std),
                      np.asarray(result.covariance, float))
         stage = "the refitted model is invalid on the validation run"
-        simulated = _simulate(new, validation)
+        try:
+            simulated = _simulate(new, validation)
+        except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError):
+            # the refit from a distorted nominal may end where the model has no equilibrium at
+            # the validation run's operating point: once more from the structure's defaults
+            result = _refit(structure, model, train, free, fit_options, from_defaults=True)
+            new = _Model(structure, dict(result.parameters), free, dict(result.std),
+                         np.asarray(result.covariance, float))
+            simulated = _simulate(new, validation)
         trial = judge_trial(candidate, structure, result, model, train, validation, current,
                             simulated, folds)
     except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError) as error:
@@ -373,13 +388,32 @@ def _try(model: _Model, candidate: Mapping[str, Any], train: IdentificationData,
     return trial, new, simulated
 
 
+def _predicted_contact_loss(top: Sequence[Mapping[str, Any]], remaining: Sequence[str],
+                            roles: SignalRoles, validation: IdentificationData,
+                            current: np.ndarray) -> list[dict[str, Any]]:
+    """``contact_loss`` as a candidate when the model's own prediction of the contact force on
+    the validation inputs goes below zero (a bilateral contact pulls the head), even when the
+    training run never loses contact and its residual shows no signature. Only the prediction
+    from the inputs is read, not the withheld measurement."""
+    force = roles.force
+    if "contact_loss" not in remaining or any(c["effect"] == "contact_loss" for c in top) or \
+            force not in validation.output_names:
+        return []
+    if not np.nanmin(current[:, validation.output_names.index(force)]) < 0.0:
+        return []
+    return [{"effect": "contact_loss", "variant": "predicted F < 0", "err": 0.0,
+             "significant": False, "output": force, "err_total": 0.0,
+             "setting": {"output": force}}]
+
+
 def _refit(structure: AugmentedStructure, model: _Model, train: IdentificationData,
-           free: tuple[str, ...], fit_options: Mapping[str, Any]):
-    """Output-error refit from the current parameters and the effect's start values; when the
-    start is invalid (an unstable feedback), from the effect scaled towards its neutral value."""
-    initial = {k: v for k, v in model.parameters.items()
-               if k in structure.parameter_names and k not in structure.effect_parameters}
+           free: tuple[str, ...], fit_options: Mapping[str, Any], from_defaults: bool = False):
+    """Output-error refit from the current parameters (`from_defaults`: the structure's default
+    ones) and the effect's start values; when the start is invalid (an unstable feedback), from
+    the effect scaled towards its neutral value."""
     starts, bounds = structure.nominal(), structure.bounds()
+    initial = {k: v for k, v in (starts if from_defaults else model.parameters).items()
+               if k in structure.parameter_names and k not in structure.effect_parameters}
     initial = {k: float(min(max(v, bounds[k][0]), bounds[k][1])) if k in bounds else v
                for k, v in initial.items()}
     neutral = [p for p in structure.effect_parameters if bounds[p][0] <= 0.0 <= bounds[p][1]]

@@ -15,7 +15,14 @@ Formulas (the diagnosis reference, ``identification_and_diagnosis.md``):
 - validation improvement (mean fit over outputs, free run) larger than the spread of the
   improvement over ``K`` blocked folds, taken as the standard error of their mean
   (``std_k / sqrt(K)``): the raw standard deviation would reject real effects on non-stationary
-  validation runs (the Silverbox "arrow" grows in amplitude, so an effect helps most at its end).
+  validation runs (the Silverbox "arrow" grows in amplitude, so an effect helps most at its end);
+- no output's validation fit worse by more than ``t_{0.975,K-1}`` of its own fold standard error
+  (and :data:`WORSENING_FLOOR` points): the cause of a gap does not trade one output's fit for
+  another's (:func:`_worsened`);
+- an augmentation without parameters (a switch: the unilateral contact) fits nothing to the
+  data, so the validation run judges it out of sample; on training it must only show no evidence
+  against it, ``dBIC <`` :data:`SWITCH_BIC` = 2 (Kass & Raftery, 1995: below 2 "not worth more
+  than a bare mention"): a training run where the head never leaves the wire cannot show it.
 """
 from __future__ import annotations
 
@@ -36,6 +43,8 @@ MAGNITUDE = {"extra_mode": "extra_mode:gain"}
 #: Effects without a magnitude parameter (judged by dBIC and validation only).
 NO_MAGNITUDE = ("saturation", "contact_loss")
 BIC_THRESHOLD = -10.0
+#: dBIC an augmentation without parameters (a switch) may reach on training (module notes).
+SWITCH_BIC = 2.0
 SIGNIFICANCE = 3.0
 #: Fit points an output may lose on validation without it counting against an effect.
 WORSENING_FLOOR = 0.2
@@ -263,8 +272,9 @@ def judge_trial(candidate: Mapping[str, Any], structure: Any, result: Identifica
     spread = float(np.std(per_fold, ddof=1)) if len(per_fold) > 1 else 0.0
     standard_error = spread / math.sqrt(len(per_fold))
     failed = _worsened(fit_before, fit_after, per_output)
-    if not delta_bic < BIC_THRESHOLD:
-        failed.append(f"dBIC {delta_bic:.1f} >= {BIC_THRESHOLD:g}")
+    threshold = BIC_THRESHOLD if p else SWITCH_BIC
+    if not delta_bic < threshold:
+        failed.append(f"dBIC {delta_bic:.1f} >= {threshold:g}")
     if not significance > SIGNIFICANCE:
         failed.append(f"|theta|/sigma {significance:.2f} <= {SIGNIFICANCE:g}")
     if not (improvement > standard_error and improvement > 0):
@@ -323,7 +333,8 @@ def _fits(data: IdentificationData, simulated: np.ndarray) -> dict[str, float]:
 def gap_significance(analysis: Sequence[Any], data: IdentificationData,
                      alpha: float = 0.01, tuning: Mapping[str, Any] | None = None,
                      costs: Mapping[str, float] | None = None,
-                     relevance: float | None = None) -> dict[str, Any]:
+                     relevance: float | None = None,
+                     drift: Mapping[str, Sequence[str]] | None = None) -> dict[str, Any]:
     """Whether the validation residual holds a gap beyond the noise (module notes of
     :mod:`identification.diagnosis`); the reasons name the output and the test. With `tuning`
     (:func:`retuning`) a retuning inconsistent with the training estimate is a gap too.
@@ -332,7 +343,8 @@ def gap_significance(analysis: Sequence[Any], data: IdentificationData,
     fires counts only for an output whose systematic part costs at least `relevance` fit points
     (default :data:`RELEVANCE`: statistically detectable but negligible model errors are not a gap; the
     parameter-consistency test counts when any output is relevant). Tests that fire below it are
-    listed in ``below_relevance``. ``relevance = 0`` keeps the pure statistical test."""
+    listed in ``below_relevance``. ``relevance = 0`` keeps the pure statistical test. `drift`
+    (per output, :func:`drift_test`) adds the drifting terms as reasons."""
     reasons, per_output = [], {}  # tests: cross-correlation, error model, nonlinearity, mean
     costs = dict(costs or {})
     relevance = RELEVANCE if relevance is None else float(relevance)
@@ -379,6 +391,8 @@ def gap_significance(analysis: Sequence[Any], data: IdentificationData,
         z_m = stats.norm.isf(alpha / (2 * n_outputs))
         if sd > 0 and abs(a.residual_mean) > z_m * sd / math.sqrt(n_eff):
             found.append(f"{a.output_name} residual mean {a.residual_mean:.4g} differs from zero")
+        found += [f"{a.output_name} residual {term} drifts over the record"
+                  for term in (drift or {}).get(a.output_name, ())]
         keep = relevant[a.output_name]
         per_output[a.output_name] = {"significant": bool(found) and keep, "reasons": found,
                                      "white": bool(a.whiteness.white), "fit": a.fit,
@@ -442,14 +456,53 @@ none. Not taken from the benchmark: the diagnosis never sees its labels.
 """
 
 
+def drift_test(residual: np.ndarray, simulated: np.ndarray, *, blocks: int = 8,
+               alpha: float = 0.01) -> list[str]:
+    """Whether the residual's offset or its gain on the prediction drifts over the record.
+
+    A sensor whose gain or zero drifts, a bed that warms up: the residual ``eps`` is then
+    ``a(t) + b(t) y_hat`` with slowly changing ``a``, ``b``, zero-mean over the record and
+    uncorrelated with the inputs on average, so neither the cross-correlation nor the
+    nonlinearity tests see it. The record is cut into `blocks` blocks; in each, ``eps`` is
+    regressed on ``[1, y_hat - mean(y_hat)]``; the block estimates of ``a`` and ``b`` are regressed
+    on the block's centre time, and the slope's t statistic (``blocks - 2`` degrees of freedom,
+    the scatter of the block estimates about their line as the error, so a coloured residual
+    widens it by itself while blocks are longer than its correlation time) is compared with the
+    ``alpha`` quantile, Bonferroni over the two. Returns the names of the drifting terms."""
+    eps, y_hat = np.asarray(residual, float), np.asarray(simulated, float)
+    ok = np.isfinite(eps) & np.isfinite(y_hat)
+    parts = [p for p in np.array_split(np.flatnonzero(ok), blocks) if len(p) > 3]
+    if len(parts) < 4:
+        return []
+    centre, estimates = [], []
+    for index in parts:
+        x = y_hat[index] - np.mean(y_hat[ok])
+        basis = np.column_stack([np.ones(len(index)), x])
+        estimates.append(np.linalg.lstsq(basis, eps[index], rcond=None)[0])
+        centre.append(float(np.mean(index)))
+    t = np.asarray(centre) - np.mean(centre)
+    estimates = np.asarray(estimates)
+    found = []
+    quantile = float(stats.t.isf(alpha / 4, len(parts) - 2))
+    for k, name in enumerate(("offset", "gain")):
+        e = estimates[:, k]
+        slope = float(t @ (e - e.mean()) / (t @ t))
+        scatter = e - e.mean() - slope * t
+        error = math.sqrt(float(scatter @ scatter) / (len(parts) - 2) / float(t @ t))
+        if error > 0 and abs(slope) / error > quantile:
+            found.append(name)
+    return found
+
+
 def systematic_cost(inputs: np.ndarray, measured: np.ndarray, simulated: np.ndarray, *,
                     order: int = 20, power_lags: int = 3) -> float:
     """Fit points the systematic (input-explained) part of one output's residual costs.
 
     The residual ``eps = y - y_hat`` is regressed on ``[1, u_i(t - k) (k < order), s(t - k)
     (k < power_lags)]`` with the power signals ``s`` of the nonlinearity tests (``u_i^2``,
-    ``y_hat^2``, ``y_hat^3``, standardised): the mean, FIR error model and Billings-Voon signals
-    the gap tests use. The fitted part's energy less what white noise of the rest's variance
+    ``y_hat^2``, ``y_hat^3``, standardised) and the drift terms ``tau``, ``tau y_hat`` (``tau``
+    the centred time): the mean, FIR error model, Billings-Voon signals and drift the gap tests
+    use. The fitted part's energy less what white noise of the rest's variance
     ``s^2`` would put in ``p`` regressors, ``p s^2``, is the systematic energy ``E_s``; its cost is
     ``100 sqrt(E_s / ||y - mean(y)||^2)``, the fit points it removes (thesis eq. 4.1.3).
     Low-pass coloured noise puts more than ``p s^2`` into the slow regressors, so the cost of a
@@ -470,6 +523,8 @@ def systematic_cost(inputs: np.ndarray, measured: np.ndarray, simulated: np.ndar
     for x, lags in signals:
         x = (x - np.mean(x)) / (np.std(x) or 1.0)
         columns += [np.r_[np.full(k, x[0]), x[:n - k]] for k in range(min(lags, n - 1))]
+    drift = np.linspace(-0.5, 0.5, n)
+    columns += [drift, drift * (y_hat - np.mean(y_hat)) / (np.std(y_hat) or 1.0)]
     phi = np.column_stack(columns)[ok]
     phi = phi / np.maximum(np.linalg.norm(phi, axis=0), 1e-300)
     coefficients, *_ = np.linalg.lstsq(phi, eps[ok], rcond=None)
@@ -516,4 +571,4 @@ def settling_time(structure: ModelStructure, parameters: Mapping[str, float],
 
 __all__ = ["build_structure", "default_roles", "residuals", "effective_samples", "sensitivities",
            "retuning", "judge_trial", "gap_significance", "where_summary", "systematic_cost",
-           "settling_time", "RELEVANCE"]
+           "settling_time", "RELEVANCE", "drift_test"]
