@@ -140,6 +140,26 @@ class Diagnosis:
         return {o: 1.0 - ((100 - self.fit_after[o]) / (100 - self.fit_before[o])) ** 2
                 if self.fit_before[o] < 100 else math.nan for o in self.output_names}
 
+    def next_experiment(self) -> dict[str, str] | None:
+        """The discrimination experiment (design of experiments, T-optimality) that would best
+        tell whether a suspected effect is there, where such a design exists: Coulomb friction in
+        a pantograph structure (``panto doe --discriminate``; hinge friction ``T_f`` for the
+        physical models, ``F_f1`` for the two-mass oscillator). Suspected: accepted, or refitted
+        and rejected (ranked on the training residual but not confirmed on the withheld data)."""
+        tried = {t["effect"] for r in self.rounds for t in r.get("tried", ())}
+        if "coulomb_friction" not in set(self.effects) | tried:
+            return None
+        design = "F_f1" if self.structure.startswith("two-mass") else \
+            "T_f" if self.structure.startswith("physical") else None
+        if design is None:
+            return None
+        state = "accepted" if "coulomb_friction" in self.effects else "suspected, not confirmed"
+        return {"effect": "coulomb_friction", "status": state, "design": design,
+                "command": f"panto doe --discriminate {design} --parameters PARAMETERS.json "
+                           f"--out doe_{design}",
+                "why": "a rig run designed so that the friction shows in the outputs beyond what "
+                       "re-fitting the nominal can absorb (T-optimal; design of experiments)"}
+
     def to_dict(self) -> dict:
         """JSON-ready: verdict, effects, per-output fits, where, rounds, steps, summary."""
         outputs = {o: {"fit_before": self.fit_before[o], "fit_after": self.fit_after[o],
@@ -155,6 +175,7 @@ class Diagnosis:
             "rounds": list(self.rounds),
             "steps": [step.__dict__ for step in self.steps],
             "analysis": [a.to_dict() for a in self.analysis_before],
+            "next_experiment": self.next_experiment(),
             "wall_time": self.wall_time})
 
 

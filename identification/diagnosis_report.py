@@ -168,7 +168,17 @@ def _head(diagnosis: Any) -> str:
             f"<p><b>Verdict: {html.escape(verdict)}</b>"
             + (f" &mdash; {html.escape(' then '.join(diagnosis.effects))}" if diagnosis.effects else "")
             + f"</p><p>{html.escape(diagnosis.summary)}</p>"
-            f"<p>Wall time {diagnosis.wall_time:.1f} s.</p>")
+            + _next_experiment(diagnosis)
+            + f"<p>Wall time {diagnosis.wall_time:.1f} s.</p>")
+
+
+def _next_experiment(diagnosis: Any) -> str:
+    suggestion = diagnosis.next_experiment()
+    if not suggestion:
+        return ""
+    return (f"<p>Next experiment ({html.escape(suggestion['effect'])}, "
+            f"{html.escape(suggestion['status'])}): <code>{html.escape(suggestion['command'])}"
+            f"</code> &mdash; {html.escape(suggestion['why'])}.</p>")
 
 
 __all__ = ["write_report", "plot_series", "plot_bands"]

@@ -82,6 +82,12 @@ def test_the_hidden_effect_is_named_first_and_closes_the_gap(effect):
     # the force fit on the withheld run rises and most of the residual energy goes
     assert step.fit_after["F_c"] > step.fit_before["F_c"] + 1.0, "\n".join(lines)
     assert step.energy_removed["F_c"] > 0.6, "\n".join(lines)
+    # the diagnosis points to the discrimination design that exists for friction (issue 7)
+    suggestion = result.next_experiment()
+    if effect == "coulomb_friction":
+        assert suggestion["design"] == "T_f" and "--discriminate T_f" in suggestion["command"]
+        assert suggestion["status"] == "accepted"
+    assert result.to_dict()["next_experiment"] == suggestion
 
 
 def test_friction_acts_as_an_equivalent_bellow_pressure_on_both_outputs():
