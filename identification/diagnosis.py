@@ -382,18 +382,14 @@ def _try(model: _Model, candidate: Mapping[str, Any], train: IdentificationData,
         structure = AugmentedStructure(model.structure, effect, roles, candidate["setting"])
         free = tuple(model.free) + tuple(p for p in structure.effect_parameters
                                          if p not in model.free)
-        result = _refit(structure, model, train, free, fit_options)
-        new = _Model(structure, dict(result.parameters), free, dict(result.std),
-                     np.asarray(result.covariance, float))
+        result, new = _refit(structure, model, train, free, fit_options)
         stage = "the refitted model is invalid on the validation run"
         try:
             simulated = _simulate(new, validation)
         except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError):
             # the refit from a distorted nominal may end where the model has no equilibrium at
             # the validation run's operating point: once more from the structure's defaults
-            result = _refit(structure, model, train, free, fit_options, from_defaults=True)
-            new = _Model(structure, dict(result.parameters), free, dict(result.std),
-                         np.asarray(result.covariance, float))
+            result, new = _refit(structure, model, train, free, fit_options, from_defaults=True)
             simulated = _simulate(new, validation)
         trial = judge_trial(candidate, structure, result, model, train, validation, current,
                             simulated, folds)
@@ -428,10 +424,11 @@ def _predicted_contact_loss(top: Sequence[Mapping[str, Any]], remaining: Sequenc
 
 
 def _refit(structure: AugmentedStructure, model: _Model, train: IdentificationData,
-           free: tuple[str, ...], fit_options: Mapping[str, Any], from_defaults: bool = False):
-    """Output-error refit from the current parameters (`from_defaults`: the structure's default
-    ones) and the effect's start values; when the start is invalid (an unstable feedback), from
-    the effect scaled towards its neutral value."""
+           free: tuple[str, ...], fit_options: Mapping[str, Any], from_defaults: bool = False
+           ) -> tuple[Any, _Model]:
+    """The result and the refitted model of an output-error refit from the current parameters
+    (`from_defaults`: the structure's default ones) and the effect's start values; when the start
+    is invalid (an unstable feedback), from the effect scaled towards its neutral value."""
     starts, bounds = structure.nominal(), structure.bounds()
     initial = {k: v for k, v in (starts if from_defaults else model.parameters).items()
                if k in structure.parameter_names and k not in structure.effect_parameters}
@@ -444,7 +441,8 @@ def _refit(structure: AugmentedStructure, model: _Model, train: IdentificationDa
         result = fit_least_squares(structure, train, free=free, initial={**initial, **scaled},
                                    **fit_options)
         if not result.message.startswith("model invalid"):
-            return result
+            return result, _Model(structure, dict(result.parameters), free, dict(result.std),
+                                  np.asarray(result.covariance, float))
     raise IdentificationError(f"{structure.name}: {result.message}")
 
 

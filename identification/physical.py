@@ -206,11 +206,11 @@ class PhysicalLinear(_PhysicalBase):
         p = self.parameter_vector(parameters)
         return linearise(p, [float(u0[0]), float(u0[1])], _nominal_start(float(u0[0]), float(u0[1])))
 
-    def discrete_model(self, parameters: Mapping[str, float], data: IdentificationData
-                       ) -> DiscreteLinear:
-        """The linearisation about the operating point, discretised on `data`'s sample period
-        (``x[k+1] = Phi x[k] + drive[k]``), its start in equilibrium with the first input and the
-        output map of the simulated outputs (module notes)."""
+    def deviation_model(self, parameters: Mapping[str, float], data: IdentificationData
+                        ) -> tuple[np.ndarray, ...]:
+        """``(A, B, C, D, y0, du, x_start)``: the linearisation about the operating point (all
+        outputs), the inputs' deviations ``du`` from it and the state in equilibrium with the
+        first input sample."""
         u = self.model_inputs(parameters, data)
         u0 = u.mean(axis=0) if self.operating_point == "mean" else u[0]
         a, b, c, d, _, y0 = self.linear_model(parameters, u0)
@@ -219,6 +219,14 @@ class PhysicalLinear(_PhysicalBase):
             x_start = -np.linalg.solve(a, b @ du[0])
         except (np.linalg.LinAlgError, ValueError) as error:
             raise IdentificationError(f"{self.name}: singular linearisation ({error})") from None
+        return a, b, c, d, y0, du, x_start
+
+    def discrete_model(self, parameters: Mapping[str, float], data: IdentificationData
+                       ) -> DiscreteLinear:
+        """The linearisation about the operating point, discretised on `data`'s sample period
+        (``x[k+1] = Phi x[k] + drive[k]``), its start in equilibrium with the first input and the
+        output map of the simulated outputs (module notes)."""
+        a, b, c, d, y0, du, x_start = self.deviation_model(parameters, data)
         phi, gamma0, gamma1 = discretise(a, b, data.sample_period, self.hold)
         drive = du[:-1] @ gamma0.T + np.diff(du, axis=0) @ gamma1.T
         rows = self._rows()

@@ -290,13 +290,9 @@ class UnilateralContact(ModelStructure):
     def _linear_form(self, parameters, data):
         """``(A, B, C, D, u, x0, hold)`` with a constant last input column (any static part)."""
         nominal = self.nominal_structure
-        if hasattr(nominal, "linear_model"):  # physical-linear: deviations from u0
-            u = nominal.model_inputs(parameters, data)
-            u0 = u.mean(axis=0) if nominal.operating_point == "mean" else u[0]
-            a, b, c, d, _, y0 = nominal.linear_model(parameters, u0)
+        if hasattr(nominal, "deviation_model"):  # physical-linear: deviations from u0
+            a, b, c, d, y0, du, x0 = nominal.deviation_model(parameters, data)
             _check_stable(a, nominal.name, parameters)
-            du = u - u0
-            x0 = -np.linalg.solve(a, b @ du[0])
             b = np.hstack([b, np.zeros((len(b), 1))])
             d = np.hstack([d, y0[:, None]])
             return a, b, c, d, np.column_stack([du, np.ones(len(du))]), x0, nominal.hold
