@@ -74,6 +74,13 @@ Progress = Callable[[str], None]
 #: Library effects the test bed can hide (see the module notes for the mapping).
 LIBRARY_DRAW = ("coulomb_friction", "cubic_stiffness", "sensor_inertia", "actuator_lag",
                 "input_delay", "extra_mode", "contact_loss", "offset")
+#: The test bed's imperfections (:class:`rig.imperfections.RigImperfections` fields) each library
+#: effect names (the module notes' table).
+IMPERFECTIONS_OF = {"coulomb_friction": ("hinge_friction_torque",),
+                    "cubic_stiffness": ("head_stiffening",), "sensor_inertia": ("bar_mass",),
+                    "actuator_lag": ("bellow_lag",), "input_delay": ("bellow_delay",),
+                    "extra_mode": ("robot_compliance",), "contact_loss": ("unilateral_contact",),
+                    "offset": ("force_offset", "laser_offset")}
 #: Effects outside the library (emulated by post-processing the recorded force).
 OUTSIDE_DRAW = ("hysteresis", "gain_drift")
 #: Share of the draw per kind: library effect, none, outside.

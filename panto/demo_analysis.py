@@ -137,11 +137,41 @@ def diagnose_gap(state: dict[str, Any], progress: Progress) -> dict:
     progress(f"verdict {result.verdict} {list(result.effects)}; validation fit " + ", ".join(
         f"{o} {result.fit_before[o]:.1f} -> {result.fit_after[o]:.1f} %"
         for o in result.output_names))
-    return {"verdict": result.verdict, "effects": list(result.effects),
+    steps = [{"effect": s.effect, "parameters": dict(s.parameters),
+              "std": {k: _finite(v) for k, v in s.std.items()}, "fit_after": dict(s.fit_after),
+              "energy_removed": {k: _finite(v) for k, v in s.energy_removed.items()}}
+             for s in result.steps]
+    return {"verdict": result.verdict, "effects": list(result.effects), "steps": steps,
+            "rig_truth": rig_truth(state["runs"]["validation"], result.effects),
             "fit_before": dict(result.fit_before), "fit_after": dict(result.fit_after),
             "gap_closed": {k: _finite(v) for k, v in closed.items()},
             "summary": result.summary, "report": str(paths["html"].relative_to(out)),
             "plot": "diagnosis/validation.png"}
+
+
+def rig_truth(folder: Any, named: Any) -> list[dict]:
+    """What the virtual rig hid in the run at `folder` (its truth record, never shown to the
+    diagnosis) beside what the diagnosis `named`: one row per imperfection that was on, with the
+    library effect that stands for it (None: no library effect does; it is absorbed by the
+    nominal's parameters or left in the gap). Empty for a run without a truth record (a real
+    rig)."""
+    from pathlib import Path
+
+    from identification.diagnosis_benchmark import IMPERFECTIONS_OF
+    from rig.dataset import read_dataset
+
+    truth = dict(read_dataset(Path(folder) / "run.csv").metadata.truth or {})
+    hidden = truth.get("imperfections") or {}
+    effect_of = {name: effect for effect, names in IMPERFECTIONS_OF.items() for name in names}
+    extra = ("bellow_angle_coefficient",)  # a model parameter (kappa_p), not a library effect
+    rows = []
+    for name in (*effect_of, *extra):
+        value = hidden.get(name)
+        if value:
+            effect = effect_of.get(name)
+            rows.append({"imperfection": name, "value": value, "effect": effect,
+                         "named": bool(effect and effect in named)})
+    return rows
 
 
 def _finite(value: float) -> float | None:

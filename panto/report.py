@@ -91,6 +91,11 @@ def _number(value: Any, digits: int = 1) -> str:
     return _e(value)
 
 
+def _parameter(value: float, std: float | None) -> str:
+    return f"{value:.3g} ± {std:.2g}" if std is not None and math.isfinite(std) \
+        else f"{value:.3g}"
+
+
 def table(header: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
     """An HTML table; cells already holding HTML (``<span``) are kept, others escaped."""
     def cell(value: Any) -> str:
@@ -301,6 +306,23 @@ def _diagnosis_section(diagnosis: Mapping[str, Any], out: Path, embed: bool) -> 
             for o in diagnosis["fit_before"]]
     parts.append(table(("output", "validation fit before [%]", "after [%]",
                         "residual energy removed [%]"), rows))
+    steps = diagnosis.get("steps") or []
+    if steps:
+        parts.append("<p>Found effects, in the order accepted (each refitted with the nominal's "
+                     "parameters on the training run, judged on the withheld validation run):</p>")
+        parts.append(table(("effect", "fitted", "validation fit after [%]"), [
+            (s["effect"], ", ".join(f"{k} {_parameter(v, s['std'].get(k))}"
+                                    for k, v in s["parameters"].items()) or "(a switch)",
+             ", ".join(f"{o} {_number(v)}" for o, v in s["fit_after"].items()))
+            for s in steps]))
+    truth = diagnosis.get("rig_truth") or []
+    if truth:
+        parts.append("<p>What the virtual rig hid (its truth record; the diagnosis never sees "
+                     "it):</p>")
+        parts.append(table(("imperfection", "value", "library effect", "named"), [
+            (r["imperfection"], "on" if isinstance(r["value"], bool) else f"{r['value']:g}",
+             r["effect"] or "(none)",
+             "yes" if r["named"] else "no") for r in truth]))
     parts.append(f"<p>Full diagnosis report: <a href='{_e(diagnosis['report'])}'>"
                  f"{_e(diagnosis['report'])}</a></p>")
     parts.append(_image(out, diagnosis["plot"], embed, "validation run: before and after"))

@@ -124,6 +124,13 @@ def test_quick_demo_runs_every_step_and_writes_the_report(tmp_path):
     assert diagnosis["verdict"] in ("effect", "unexplained", "none")
     assert all(diagnosis["fit_after"][o] >= diagnosis["fit_before"][o] - 1e-9
                for o in diagnosis["fit_before"])
+    assert [s["effect"] for s in diagnosis["steps"]] == diagnosis["effects"]
+    # The rig's truth beside the verdict: the default rig's friction and contact loss are on,
+    # and a row is marked named exactly when the diagnosis accepted its library effect.
+    hidden = {r["imperfection"]: r for r in diagnosis["rig_truth"]}
+    assert hidden["hinge_friction_torque"]["value"] == 20.0
+    assert hidden["unilateral_contact"]["effect"] == "contact_loss"
+    assert all(r["named"] == (r["effect"] in diagnosis["effects"]) for r in hidden.values())
     doe = summary["doe"]
     assert doe["det_ratio_per_parameter"] > 1.0  # the design beats an APRBS of equal length
     load_profile(tmp_path / doe["files"]["profile"])  # the rig accepts the designed run
@@ -135,6 +142,7 @@ def test_quick_demo_runs_every_step_and_writes_the_report(tmp_path):
     assert cosim["mean"]["value"] == pytest.approx(summary["cosim"]["static_force_N"], rel=0.15)
     report = (tmp_path / "report.html").read_text()
     assert "EN 50318" in report and "physical-linear" in report
+    assert "What the virtual rig hid" in report
     assert report.count("data:image/png;base64") >= 10
     # the overview picture gathers the six panels a failed step did not leave out
     from matplotlib.image import imread
