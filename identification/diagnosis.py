@@ -31,7 +31,8 @@ causes it, and how far the gap shrinks once that effect is in the model (issue 8
    magnitude parameter is significant, ``|theta| / sigma_theta > 3``, ``sigma_theta`` inflated by
    ``sqrt(N / N_eff)`` for coloured residuals; (c) on the validation run the free-run fit (mean
    over outputs) improves by more than the spread of the improvement across ``folds`` blocked
-   folds (its standard error ``std / sqrt(folds)``), and no output gets worse beyond its own
+   folds (each fold's share of the whole-run change, times ``folds``; its standard error
+   ``std / sqrt(folds)``), and no output gets worse beyond its own
    fold standard error (``t_{0.975}`` of it, at least 0.2 points). A model the refit leaves
    invalid on the validation run (no static equilibrium at its operating point) is rejected.
    The passing candidate with the largest

@@ -20,6 +20,8 @@ Formulas (the diagnosis reference, ``identification_and_diagnosis.md``):
 - no output's validation fit worse by more than ``t_{0.975,K-1}`` of its own fold standard error
   (and :data:`WORSENING_FLOOR` points): the cause of a gap does not trade one output's fit for
   another's (:func:`_worsened`);
+- some output's validation fit better by at least :data:`IMPROVEMENT_FLOOR` points: a
+  consistent but negligible gain (0.03 points of a 99 % fit) is no cause of a gap anyone sees;
 - an augmentation without parameters (a switch: the unilateral contact) fits nothing to the
   data, so the validation run judges it out of sample; on training it must only show no evidence
   against it, ``dBIC <`` :data:`SWITCH_BIC` = 2 (Kass & Raftery, 1995: below 2 "not worth more
@@ -49,6 +51,9 @@ SWITCH_BIC = 2.0
 SIGNIFICANCE = 3.0
 #: Fit points an output may lose on validation without it counting against an effect.
 WORSENING_FLOOR = 0.2
+#: Fit points at least one output must gain on validation for an effect to count as a cause:
+#: the same threshold of relevance as :data:`WORSENING_FLOOR`.
+IMPROVEMENT_FLOOR = WORSENING_FLOOR
 PANTOGRAPH_SIGNALS = {"eta", "p", "F_c", "y_cb", "xi"}
 
 
@@ -278,6 +283,10 @@ def judge_trial(candidate: Mapping[str, Any], structure: Any, result: Identifica
         failed.append(f"dBIC {delta_bic:.1f} >= {threshold:g}")
     if not significance > SIGNIFICANCE:
         failed.append(f"|theta|/sigma {significance:.2f} <= {SIGNIFICANCE:g}")
+    best = max(fit_after[o] - fit_before[o] for o in fit_before)
+    if not best >= IMPROVEMENT_FLOOR:
+        failed.append(f"no output's validation fit improves by {IMPROVEMENT_FLOOR:g} points "
+                      f"(best {best:.2f})")
     if not (improvement > standard_error and improvement > 0):
         failed.append(f"validation improvement {improvement:.2f} not above the folds' standard "
                       f"error {standard_error:.2f}")

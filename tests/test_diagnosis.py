@@ -168,3 +168,25 @@ def test_augmentations_transform_inputs_and_outputs_as_documented():
     step = np.r_[np.zeros(100), np.ones(4900)]
     response = mode_response(step, 5.0, 0.1, 0.001)
     assert abs(response[-1]) < 1e-3 and np.min(response) < -0.5  # zero static gain, rings
+
+
+def test_fold_improvements_share_the_whole_run_change_and_ignore_a_quiet_blocks_scale():
+    from identification.diagnosis_support import _fold_improvements
+
+    n = 400
+    t = np.arange(n) * 0.01
+    y = np.sin(2 * np.pi * 0.5 * t)
+    y[:100] = 0.01 * np.sin(2 * np.pi * 5 * t[:100])  # a quiet first block (a start transient)
+    data = IdentificationData(t, np.zeros((n, 1)), y[:, None], ("u",), ("y",))
+    current = y + 0.05 * np.cos(7 * t)
+    simulated = current.copy()
+    simulated[:100] = y[:100] + 0.01 * np.cos(7 * t[:100])  # better only in the quiet block
+    folds = _fold_improvements(data, current[:, None], simulated[:, None], 4)[:, 0]
+    whole = fit_percent(y, simulated) - fit_percent(y, current)
+    # Only block 0 changed: its value is K times the whole-run change, the others are zero,
+    # so the folds' mean IS the whole-run improvement the acceptance compares it with.
+    assert folds[1:] == pytest.approx(0.0, abs=1e-12)
+    assert np.mean(folds) == pytest.approx(whole, rel=1e-12)
+    # The block's own fit would have been normalised by its tiny variance: tens of points.
+    own = fit_percent(y[:100], simulated[:100]) - fit_percent(y[:100], current[:100])
+    assert own > 10 * abs(folds[0]) and abs(folds[0]) < 20.0
