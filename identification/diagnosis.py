@@ -141,6 +141,10 @@ class Diagnosis:
         return {o: 1.0 - ((100 - self.fit_after[o]) / (100 - self.fit_before[o])) ** 2
                 if self.fit_before[o] < 100 else math.nan for o in self.output_names}
 
+    def training_only(self) -> list[dict[str, Any]]:
+        """Effects decisive on training but not confirmed by the withheld run (:func:`_training_only`)."""
+        return _training_only(self.rounds, self.effects)
+
     def next_experiment(self) -> dict[str, str] | None:
         """The discrimination experiment (design of experiments, T-optimality) that would best
         tell whether a suspected effect is there, where such a design exists: Coulomb friction in
@@ -177,6 +181,7 @@ class Diagnosis:
             "steps": [step.__dict__ for step in self.steps],
             "analysis": [a.to_dict() for a in self.analysis_before],
             "next_experiment": self.next_experiment(),
+            "training_only": self.training_only(),
             "wall_time": self.wall_time})
 
 
@@ -283,7 +288,8 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
     verdict = "effect" if steps else ("unexplained" if gap["significant"] else "none")
     fit_after = _fit(validation, current)
     where = where_summary(analysis_before, validation)
-    summary = _summary(verdict, accepted, fit_before, fit_after, where, remaining_gap)
+    summary = _summary(verdict, accepted, fit_before, fit_after, where, remaining_gap) + \
+        _training_only_text(_training_only(rounds, accepted))
     say(f"diagnose: verdict {verdict}: {summary}")
     return Diagnosis(
         verdict, tuple(accepted), nominal.name, validation.output_names, fit_before, fit_after,
@@ -499,6 +505,39 @@ def _summary(verdict: str, effects: Sequence[str], before: Mapping[str, float],
     rest = "; a significant gap remains: " + "; ".join(remaining.get("reasons", [])) \
         if remaining.get("significant") else ""
     return f"{' then '.join(effects)}: validation fit {fits}{rest}"
+
+
+#: How :func:`~identification.diagnosis_support.judge_trial` words "no gain on validation".
+_NO_GAIN = ("validation improvement", "no output's validation fit improves")
+
+
+def _training_only(rounds: Sequence[Mapping[str, Any]], accepted: Sequence[str]
+                   ) -> list[dict[str, Any]]:
+    """The effects the training run supports decisively (``dBIC < -10``, ``|theta|/sigma > 3``)
+    that were rejected only because the withheld run shows no gain (none made an output worse):
+    the validation run does not excite them, so it can neither confirm nor refute them. Their
+    latest trial; strongest training evidence first."""
+    latest: dict[str, Mapping[str, Any]] = {}
+    for round_ in rounds:
+        for trial in round_.get("tried", ()):
+            latest[trial["effect"]] = trial
+    found = []
+    for effect, trial in latest.items():
+        failed = trial.get("failed", ())
+        if effect in accepted or not failed or not all(f.startswith(_NO_GAIN) for f in failed):
+            continue
+        found.append({"effect": effect, "variant": trial["variant"],
+                      "delta_bic": trial["delta_bic"], "improvement": trial["improvement"]})
+    return sorted(found, key=lambda item: item["delta_bic"])
+
+
+def _training_only_text(items: Sequence[Mapping[str, Any]]) -> str:
+    if not items:
+        return ""
+    return ("; decisive on training but not shown by the withheld run (which does not excite "
+            "them; a run that does would tell): " + ", ".join(
+                f"{i['effect']} {i['variant']} (dBIC {i['delta_bic']:.0f}, validation "
+                f"{i['improvement']:+.2f} points)" for i in items))
 
 
 __all__ = ["diagnose", "fit_nominal", "Diagnosis", "Trial", "Step", "effective_samples"]

@@ -190,3 +190,22 @@ def test_fold_improvements_share_the_whole_run_change_and_ignore_a_quiet_blocks_
     # The block's own fit would have been normalised by its tiny variance: tens of points.
     own = fit_percent(y[:100], simulated[:100]) - fit_percent(y[:100], current[:100])
     assert own > 10 * abs(folds[0]) and abs(folds[0]) < 20.0
+
+
+def test_training_only_lists_effects_the_withheld_run_cannot_judge():
+    from identification.diagnosis import _training_only
+
+    def trial(effect, bic, failed):
+        return {"effect": effect, "variant": "v", "delta_bic": bic, "improvement": 0.01,
+                "failed": tuple(failed)}
+
+    no_gain = "validation improvement 0.01 not above the folds' standard error 0.2"
+    rounds = [{"tried": [trial("actuator_lag", -4000.0, [no_gain]),
+                         trial("input_delay", -3000.0, [no_gain, "no output's validation fit "
+                                                        "improves by 0.2 points (best 0.05)"]),
+                         trial("extra_mode", -5.0, ["dBIC -5 >= -10", no_gain]),
+                         trial("offset", -80.0, ["F_c worse on validation by 1.00 points"]),
+                         trial("coulomb_friction", -300.0, [])]}]
+    found = _training_only(rounds, accepted=("coulomb_friction",))
+    # decisive on training, rejected only for want of a validation gain: strongest first
+    assert [f["effect"] for f in found] == ["actuator_lag", "input_delay"]
