@@ -515,14 +515,12 @@ def _training_only(rounds: Sequence[Mapping[str, Any]], accepted: Sequence[str]
                    ) -> list[dict[str, Any]]:
     """The effects the training run supports decisively (``dBIC < -10``, ``|theta|/sigma > 3``)
     that were rejected only because the withheld run shows no gain (none made an output worse):
-    the validation run does not excite them, so it can neither confirm nor refute them. Their
-    latest trial; strongest training evidence first."""
-    latest: dict[str, Mapping[str, Any]] = {}
-    for round_ in rounds:
-        for trial in round_.get("tried", ()):
-            latest[trial["effect"]] = trial
+    the validation run does not excite them, so it can neither confirm nor refute them. From the
+    last round (earlier rounds judged them against a model since changed); strongest training
+    evidence first."""
     found = []
-    for effect, trial in latest.items():
+    for trial in (rounds[-1].get("tried", ()) if rounds else ()):
+        effect = trial["effect"]
         failed = trial.get("failed", ())
         if effect in accepted or not failed or not all(f.startswith(_NO_GAIN) for f in failed):
             continue

@@ -139,7 +139,8 @@ def diagnose_gap(state: dict[str, Any], progress: Progress) -> dict:
         for o in result.output_names))
     steps = [{"effect": s.effect, "parameters": dict(s.parameters),
               "std": {k: _finite(v) for k, v in s.std.items()}, "fit_after": dict(s.fit_after),
-              "energy_removed": {k: _finite(v) for k, v in s.energy_removed.items()}}
+              "energy_removed": {k: _finite(v) for k, v in s.energy_removed.items()},
+              "hinge_torque_Nm": _hinge_torque(s, result.final_parameters)}
              for s in result.steps]
     return {"verdict": result.verdict, "effects": list(result.effects), "steps": steps,
             "rig_truth": rig_truth(state["runs"]["validation"], result.effects),
@@ -147,6 +148,17 @@ def diagnose_gap(state: dict[str, Any], progress: Progress) -> dict:
             "gap_closed": {k: _finite(v) for k, v in closed.items()},
             "summary": result.summary, "report": str(paths["html"].relative_to(out)),
             "plot": "diagnosis/validation.png"}
+
+
+def _hinge_torque(step: Any, parameters: Any) -> list[float | None] | None:
+    """A friction found as an equivalent bellow pressure ``c`` [bar] in physical-linear, as the
+    hinge torque it stands for, ``k_p |c|`` [N m] (the bellow torque is ``k_p p`` on the lower
+    arm, reference pantograph_model.md), with its standard deviation; None for other effects."""
+    c = step.parameters.get("coulomb_friction:p")
+    if c is None or "k_p" not in parameters:
+        return None
+    k_p = float(parameters["k_p"])
+    return [abs(float(c)) * k_p, _finite(float(step.std.get("coulomb_friction:p", math.nan)) * k_p)]
 
 
 def rig_truth(folder: Any, named: Any) -> list[dict]:

@@ -311,8 +311,10 @@ def _diagnosis_section(diagnosis: Mapping[str, Any], out: Path, embed: bool) -> 
         parts.append("<p>Found effects, in the order accepted (each refitted with the nominal's "
                      "parameters on the training run, judged on the withheld validation run):</p>")
         parts.append(table(("effect", "fitted", "validation fit after [%]"), [
-            (s["effect"], ", ".join(f"{k} {_parameter(v, s['std'].get(k))}"
-                                    for k, v in s["parameters"].items()) or "(a switch)",
+            (s["effect"], (", ".join(f"{k} {_parameter(v, s['std'].get(k))}"
+                                     for k, v in s["parameters"].items()) or "(a switch)")
+             + (f" (a hinge friction torque of {_parameter(*s['hinge_torque_Nm'])} N m)"
+                if s.get("hinge_torque_Nm") else ""),
              ", ".join(f"{o} {_number(v)}" for o, v in s["fit_after"].items()))
             for s in steps]))
     truth = diagnosis.get("rig_truth") or []

@@ -171,3 +171,15 @@ def test_a_failing_demo_step_is_recorded_and_the_others_still_run(tmp_path, monk
     assert summary["failed_steps"] == ["two", "three"]
     assert summary["four"] == {"value": 1}
     assert "valve is stuck" in (tmp_path / "report.html").read_text()
+
+
+def test_demo_states_a_friction_found_as_pressure_as_the_hinge_torque():
+    from types import SimpleNamespace
+
+    from panto.demo_analysis import _hinge_torque
+
+    step = SimpleNamespace(parameters={"coulomb_friction:p": -0.05},
+                           std={"coulomb_friction:p": 0.01})
+    # the bellow torque is k_p p on the lower arm: 0.05 bar of it is 0.05 k_p N m
+    assert _hinge_torque(step, {"k_p": 258.0}) == pytest.approx([12.9, 2.58])
+    assert _hinge_torque(SimpleNamespace(parameters={}, std={}), {"k_p": 258.0}) is None
