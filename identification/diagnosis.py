@@ -60,7 +60,8 @@ from identification.augmentations import AugmentedStructure, describe_augmentati
 from identification.base import (IdentificationData, IdentificationError, ModelStructure,
                                  fit_percent)
 from identification.diagnosis_ranking import rank_candidates
-from identification.diagnosis_support import (build_structure, default_roles, drift_test,
+from identification.diagnosis_support import (NO_GAIN_REASONS, build_structure,
+                                               default_roles, drift_test,
                                                effective_samples, gap_significance, judge_trial,
                                                retuning,
                                                settling_time, systematic_cost, where_summary)
@@ -507,10 +508,6 @@ def _summary(verdict: str, effects: Sequence[str], before: Mapping[str, float],
     return f"{' then '.join(effects)}: validation fit {fits}{rest}"
 
 
-#: How :func:`~identification.diagnosis_support.judge_trial` words "no gain on validation".
-_NO_GAIN = ("validation improvement", "no output's validation fit improves")
-
-
 def _training_only(rounds: Sequence[Mapping[str, Any]], accepted: Sequence[str]
                    ) -> list[dict[str, Any]]:
     """The effects the training run supports decisively (``dBIC < -10``, ``|theta|/sigma > 3``)
@@ -522,7 +519,7 @@ def _training_only(rounds: Sequence[Mapping[str, Any]], accepted: Sequence[str]
     for trial in (rounds[-1].get("tried", ()) if rounds else ()):
         effect = trial["effect"]
         failed = trial.get("failed", ())
-        if effect in accepted or not failed or not all(f.startswith(_NO_GAIN) for f in failed):
+        if effect in accepted or not failed or not all(f.startswith(NO_GAIN_REASONS) for f in failed):
             continue
         found.append({"effect": effect, "variant": trial["variant"],
                       "delta_bic": trial["delta_bic"], "improvement": trial["improvement"]})

@@ -54,6 +54,9 @@ WORSENING_FLOOR = 0.2
 #: Fit points at least one output must gain on validation for an effect to count as a cause:
 #: the same threshold of relevance as :data:`WORSENING_FLOOR`.
 IMPROVEMENT_FLOOR = WORSENING_FLOOR
+#: How a rejection for want of a validation gain begins (:func:`judge_trial`); read by the
+#: diagnosis to list effects the withheld run cannot judge.
+NO_GAIN_REASONS = ("no output's validation fit improves", "validation improvement")
 PANTOGRAPH_SIGNALS = {"eta", "p", "F_c", "y_cb", "xi"}
 
 
@@ -285,10 +288,10 @@ def judge_trial(candidate: Mapping[str, Any], structure: Any, result: Identifica
         failed.append(f"|theta|/sigma {significance:.2f} <= {SIGNIFICANCE:g}")
     best = max(fit_after[o] - fit_before[o] for o in fit_before)
     if not best >= IMPROVEMENT_FLOOR:
-        failed.append(f"no output's validation fit improves by {IMPROVEMENT_FLOOR:g} points "
+        failed.append(f"{NO_GAIN_REASONS[0]} by {IMPROVEMENT_FLOOR:g} points "
                       f"(best {best:.2f})")
     if not (improvement > standard_error and improvement > 0):
-        failed.append(f"validation improvement {improvement:.2f} not above the folds' standard "
+        failed.append(f"{NO_GAIN_REASONS[1]} {improvement:.2f} not above the folds' standard "
                       f"error {standard_error:.2f}")
     return {"effect": effect, "variant": candidate["variant"], "err": candidate["err"],
             "description": effect, "parameters": own, "std": std, "significance": significance,

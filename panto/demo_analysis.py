@@ -143,7 +143,8 @@ def diagnose_gap(state: dict[str, Any], progress: Progress) -> dict:
               "hinge_torque_Nm": _hinge_torque(s, result.final_parameters)}
              for s in result.steps]
     return {"verdict": result.verdict, "effects": list(result.effects), "steps": steps,
-            "rig_truth": rig_truth(state["runs"]["validation"], result.effects),
+            "rig_truth": rig_truth(validation.metadata.get("dataset", {}).get("truth"),
+                                   result.effects),
             "fit_before": dict(result.fit_before), "fit_after": dict(result.fit_after),
             "gap_closed": {k: _finite(v) for k, v in closed.items()},
             "summary": result.summary, "report": str(paths["html"].relative_to(out)),
@@ -161,19 +162,14 @@ def _hinge_torque(step: Any, parameters: Any) -> list[float | None] | None:
     return [abs(float(c)) * k_p, _finite(float(step.std.get("coulomb_friction:p", math.nan)) * k_p)]
 
 
-def rig_truth(folder: Any, named: Any) -> list[dict]:
-    """What the virtual rig hid in the run at `folder` (its truth record, never shown to the
-    diagnosis) beside what the diagnosis `named`: one row per imperfection that was on, with the
-    library effect that stands for it (None: no library effect does; it is absorbed by the
-    nominal's parameters or left in the gap). Empty for a run without a truth record (a real
-    rig)."""
-    from pathlib import Path
-
+def rig_truth(truth: Any, named: Any) -> list[dict]:
+    """What the virtual rig hid (a run's truth record, ``RunMetadata.truth``, which the
+    diagnosis never reads) beside what the diagnosis `named`: one row per imperfection that was
+    on, with the library effect that stands for it (None: no library effect does; it is absorbed
+    by the nominal's parameters or left in the gap). Empty without a truth record (a real rig)."""
     from identification.diagnosis_benchmark import IMPERFECTIONS_OF
-    from rig.dataset import read_dataset
 
-    truth = dict(read_dataset(Path(folder) / "run.csv").metadata.truth or {})
-    hidden = truth.get("imperfections") or {}
+    hidden = (truth or {}).get("imperfections") or {}
     effect_of = {name: effect for effect, names in IMPERFECTIONS_OF.items() for name in names}
     extra = ("bellow_angle_coefficient",)  # a model parameter (kappa_p), not a library effect
     rows = []
