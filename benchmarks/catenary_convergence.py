@@ -32,8 +32,8 @@ import numpy as np
 HERE = Path(__file__).parent
 sys.path.insert(0, str(HERE.parent))
 
-from catenary_cosim.catenary import DEFAULT_ELEMENT_LENGTH, Catenary  # noqa: E402
-from catenary_cosim.lines import load_line  # noqa: E402
+from panto.catenary_cosim.catenary import DEFAULT_ELEMENT_LENGTH, Catenary  # noqa: E402
+from panto.catenary_cosim.lines import load_line  # noqa: E402
 
 FORCE, SPEED = 120.0, 250 / 3.6
 SAMPLE = 0.002  # [s]

@@ -30,7 +30,7 @@ sys.path.insert(0, str(HERE.parent))
 
 
 def _setup(fmus: Path):
-    from catenary_cosim.pantographs import pantograph_setup
+    from panto.catenary_cosim.pantographs import pantograph_setup
 
     return pantograph_setup("en50318-2002").with_fmu(fmus / "TwoMass.fmu")
 
@@ -49,7 +49,7 @@ def _row(result) -> dict:
 
 
 def reference_runs(fmus: Path, steps: list[float], say) -> list[dict]:
-    from catenary_cosim.master import cosimulate
+    from panto.catenary_cosim.master import cosimulate
 
     rows = []
     for step in steps:
@@ -62,8 +62,8 @@ def reference_runs(fmus: Path, steps: list[float], say) -> list[dict]:
 
 
 def scaling(fmus: Path, spans: list[int], elements: list[float], say) -> dict:
-    from catenary_cosim.lines import load_line
-    from catenary_cosim.master import cosimulate
+    from panto.catenary_cosim.lines import load_line
+    from panto.catenary_cosim.master import cosimulate
 
     base = load_line("en50318-2002")
     rows = {"spans": [], "element_length": []}
@@ -82,7 +82,7 @@ def scaling(fmus: Path, spans: list[int], elements: list[float], say) -> dict:
 
 
 def _unknowns(line, length: float) -> int:
-    from catenary_cosim.catenary import Catenary
+    from panto.catenary_cosim.catenary import Catenary
 
     return int(Catenary(line, time_step=5e-4, element_length=length).mesh.unknowns)
 
@@ -127,7 +127,7 @@ def main() -> None:
     parser.add_argument("--quick", action="store_true", help="default time step only, fewer "
                         "scaling points")
     args = parser.parse_args()
-    from build_fmu.project import build_project_fmus
+    from panto.build_fmu.project import build_project_fmus
 
     say = lambda text: print(text, flush=True)  # noqa: E731
     load = os.getloadavg()

@@ -7,12 +7,12 @@ Run by hand; writes benchmarks/diagnosis_speed.json and benchmarks/diagnosis_spe
 
 Data: two 61 s virtual-test-bed runs (APRBS on both inputs, two realisations: training and
 validation) with the rig's imperfections as the thesis describes them (the default
-:class:`rig.imperfections.RigImperfections`), at 50 Hz, the first second dropped. Inputs eta and
+:class:`panto.rig.imperfections.RigImperfections`), at 50 Hz, the first second dropped. Inputs eta and
 p; outputs F_c (force sensor), y_cb (mean of the lasers) and the head height xi. The rig records
 no head channel (the camera would give it); here xi is the test bed's true head height plus
 1.5 mm white noise (a stand-in for the tracked pan-head marker), read from the run's truth file
 only to make that measurement: the diagnosis gets the data without any truth metadata.
-Timed: :func:`identification.diagnosis.diagnose` alone (the runs are recorded first). The machine
+Timed: :func:`panto.identification.diagnosis.pipeline.diagnose` alone (the runs are recorded first). The machine
 load is recorded: other processes on the same cores slow everything down.
 """
 from __future__ import annotations
@@ -35,12 +35,12 @@ sys.path.insert(0, str(ROOT))
 
 def record(folder: Path, seed: int, duration: float):
     """One run with the thesis' imperfections; IdentificationData (eta, p) -> (F_c, y_cb, xi)."""
-    from build_fmu.project import project_fmu
-    from identification.base import IdentificationData
-    from identification.diagnosis_benchmark import blind_data
-    from rig.dataset import read_dataset
-    from rig.profiles import load_profile
-    from rig.virtual import TRUTH_FILE, run_virtual_profile
+    from panto.build_fmu.project import project_fmu
+    from panto.identification.estimation.base import IdentificationData
+    from panto.identification.diagnosis.benchmark import blind_data
+    from panto.rig.dataset import read_dataset
+    from panto.rig.profiles import load_profile
+    from panto.rig.virtual import TRUTH_FILE, run_virtual_profile
 
     base = load_profile(ROOT / "rig" / "profiles" / "aprbs_training.json")
     profile = dataclasses.replace(base, duration=duration + 1.0, seed=base.seed + seed)
@@ -59,7 +59,7 @@ def main() -> int:
     parser.add_argument("--duration", type=float, default=60.0)
     parser.add_argument("--structure", default="physical-linear")
     args = parser.parse_args()
-    from identification.diagnosis import diagnose
+    from panto.identification.diagnosis.pipeline import diagnose
 
     with tempfile.TemporaryDirectory() as root:
         train = record(Path(root) / "train", 31, args.duration)

@@ -10,7 +10,7 @@ below, rig limits from the rig's profile, drive and pressure loop) for ``--durat
 the designed profile and the APRBS training profile of equal length are run on the virtual test
 bed (the Pantograph FMU at the nominal parameters, every rig imperfection off except the sensor
 noise: the comparison is about information); the free parameters are identified from each run by
-Levenberg-Marquardt (:func:`identification.least_squares.fit_least_squares`, 50 Hz, outputs F_c
+Levenberg-Marquardt (:func:`panto.identification.estimation.least_squares.fit_least_squares`, 50 Hz, outputs F_c
 and y_cb, start at 1.1 x the truth); reported: the covariance ratio (det per parameter, std
 ratios) designed vs APRBS, and whether the truth lies in each 95 % interval.
 """
@@ -29,13 +29,13 @@ from pathlib import Path
 HERE = Path(__file__).parent
 sys.path.insert(0, str(HERE.parent))
 
-from identification.pantograph_design import (
+from panto.identification.design.pantograph import (
     DesignOptions,
     RigInputConstraints,
     design_pantograph_experiment,
 )
-from identification.pantograph_profiles import compare_on_virtual_rig
-from identification.pantograph_sensitivity import LinearisedPantograph
+from panto.identification.design.profiles import compare_on_virtual_rig
+from panto.identification.design.pantograph_sensitivity import LinearisedPantograph
 
 FREE = ("m_c", "c_c", "k_c", "k_p", "c1", "m1")
 

@@ -36,18 +36,18 @@ sys.path.insert(0, str(HERE.parent))
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
-from identification.doe_example import run_thesis_example
-from identification.doe_oscillator import (
+from panto.identification.design.thesis_example import run_thesis_example
+from panto.identification.design.oscillator import (
     INITIAL_PHYSICAL,
     NOISE_VARIANCE,
     TransferFunctionModel,
     discretise_oscillator,
     two_sine_input,
 )
-from identification.doe_plots import plot_line_designs, plot_thesis_example
-from identification.fisher import criterion_cost, fisher_information
-from identification.input_design import GeneticOptions
-from identification.online_design import OnlineOptions
+from panto.identification.design.plots import plot_line_designs, plot_thesis_example
+from panto.identification.design.fisher import criterion_cost, fisher_information
+from panto.identification.design.input_design import GeneticOptions
+from panto.identification.design.online_design import OnlineOptions
 
 
 def time_population_evaluation(repeats: int = 50) -> float:
@@ -67,11 +67,11 @@ def time_pantograph(generations: int = 60, online_steps: int = 50) -> dict:
     parameters of the linearised physical model, and receding-horizon online steps (horizon 20
     samples of both inputs, GA population 20 x 12 generations) on a 2.4 s sensitivity window,
     the information of older samples kept as a fixed prior, against the 20 ms sample period."""
-    from identification.input_design import (InputConstraints, _DesignProblem, _run_genetic,
+    from panto.identification.design.input_design import (InputConstraints, _DesignProblem, _run_genetic,
                                              _SequenceRepair)
-    from identification.pantograph_design import (DesignOptions, RigInputConstraints,
+    from panto.identification.design.pantograph import (DesignOptions, RigInputConstraints,
                                                   design_pantograph_experiment, model_inputs)
-    from identification.pantograph_sensitivity import LinearisedPantograph
+    from panto.identification.design.pantograph_sensitivity import LinearisedPantograph
 
     free = ("m_c", "c_c", "k_c", "k_p", "c1", "m1")
     rig = RigInputConstraints.from_rig()
@@ -114,13 +114,13 @@ def time_pantograph(generations: int = 60, online_steps: int = 50) -> dict:
 
 
 def time_pantograph_online(samples: int = 150) -> list[dict]:
-    """The public receding-horizon step (:func:`identification.pantograph_online.
+    """The public receding-horizon step (:func:`panto.identification.design.pantograph_online.
     design_online_step`: SLSQP, exact gradient, warm start, every rig limit incl. acceleration
     and contact force) in closed loop on the linearised physical model, 6 parameters, per
     horizon / move-block setting: seconds per step against the 20 ms period at 50 Hz."""
-    from identification.pantograph_design import RigInputConstraints
-    from identification.pantograph_online import OnlineDesigner, run_online_design
-    from identification.pantograph_sensitivity import LinearisedPantograph
+    from panto.identification.design.pantograph import RigInputConstraints
+    from panto.identification.design.pantograph_online import OnlineDesigner, run_online_design
+    from panto.identification.design.pantograph_sensitivity import LinearisedPantograph
 
     rig = RigInputConstraints.from_rig()
     model = LinearisedPantograph("physical-linear", free=("m_c", "c_c", "k_c", "k_p", "c1", "m1"),

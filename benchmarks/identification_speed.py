@@ -10,8 +10,8 @@ Data: 60 s of the virtual test bed's training run (APRBS on both inputs, imperfe
 equilibrium and exact linearisation recomputed for every candidate, as the thesis did, section
 4.1.3) to the force and the cross-bar position from Table 4.1 as the start / prior:
 
-1. Levenberg-Marquardt (identification.least_squares.fit_least_squares): wall time and fit.
-2. The thesis' way: NSGA-II (identification.genetic.fit_pareto) with a large population, every
+1. Levenberg-Marquardt (panto.identification.estimation.least_squares.fit_least_squares): wall time and fit.
+2. The thesis' way: NSGA-II (panto.identification.estimation.genetic.fit_pareto) with a large population, every
    generation evaluated on a process pool, stopped as soon as one candidate reaches the LM run's
    least-squares cost sum_j (1 - fit_j / 100)^2 (the "same fit"), or at the generation limit.
 
@@ -44,9 +44,9 @@ def _training_run(requested: str | None, seconds: float) -> Path:
     import tempfile
     from dataclasses import replace
 
-    from build_fmu.project import project_fmu
-    from rig.profiles import load_profile
-    from rig.virtual import run_virtual_profile
+    from panto.build_fmu.project import project_fmu
+    from panto.rig.profiles import load_profile
+    from panto.rig.virtual import run_virtual_profile
 
     folder = Path(tempfile.mkdtemp(prefix="panto-bench-")) / "training"
     print(f"recording a {seconds:g} s virtual APRBS training run into {folder} ...", flush=True)
@@ -56,7 +56,7 @@ def _training_run(requested: str | None, seconds: float) -> Path:
 
 
 def _data(run: Path, seconds: float):
-    from identification.data import pantograph_data
+    from panto.identification.data.datasets import pantograph_data
 
     data = pantograph_data(run, rate=50.0)
     start = float(data.time[0])
@@ -64,8 +64,8 @@ def _data(run: Path, seconds: float):
 
 
 def _lm(structure, data, free, executor=None) -> dict:
-    from identification.genetic import polish_cost
-    from identification.least_squares import fit_least_squares
+    from panto.identification.estimation.genetic import polish_cost
+    from panto.identification.estimation.least_squares import fit_least_squares
 
     started = time.perf_counter()
     result = fit_least_squares(structure, data, free=free, executor=executor)
@@ -78,7 +78,7 @@ def _lm(structure, data, free, executor=None) -> dict:
 
 def _ga(structure, data, free, target: float, population: int, generations: int,
         workers: int) -> dict:
-    from identification.genetic import fit_pareto, polish_cost
+    from panto.identification.estimation.genetic import fit_pareto, polish_cost
 
     lines = []
 
@@ -156,7 +156,7 @@ def main() -> None:
     args = parser.parse_args()
     if args.quick:
         args.population, args.generations = 40, 5
-    from identification.physical import TABLE_4_1, PhysicalLinear
+    from panto.identification.structures.physical import TABLE_4_1, PhysicalLinear
 
     run = _training_run(args.training, args.seconds)
     data = _data(run, args.seconds)
@@ -169,7 +169,7 @@ def main() -> None:
              args.workers)
     nonlinear = None
     if not args.skip_nonlinear:
-        from identification.physical import PhysicalNonlinear
+        from panto.identification.structures.physical import PhysicalNonlinear
 
         print("LM with the FMU in the loop (nonlinear model) ...", flush=True)
         with ProcessPoolExecutor(args.workers) as pool:

@@ -4,7 +4,7 @@ Run by hand; writes benchmarks/rig_loop_timing.json and benchmarks/rig_loop_timi
 
     .venv/bin/python benchmarks/rig_loop_timing.py [--duration 60] [--cases a,b,...]
 
-The loop of :mod:`rig.session` (500 Hz control, 250 Hz drive stream, one recorded row per
+The loop of :mod:`panto.rig.session` (500 Hz control, 250 Hz drive stream, one recorded row per
 cycle) plays the project's APRBS training profile (``rig/profiles/aprbs_training.json``, cut to
 ``--duration`` seconds). Every wake-up of the loop is time-stamped by a clock wrapper
 (:class:`RecordingClock`): the deadline :math:`t_k`, when the loop asked to sleep (end of the
@@ -17,7 +17,7 @@ previous cycle's work) and when it woke. From these:
   (largest :math:`P_k`), and the work per cycle (from a wake-up to the next sleep request).
 
 Cases
-    ``emulated``: :func:`rig.realtime.run_virtual_profile_realtime`, the realistic one: the drive
+    ``emulated``: :func:`panto.rig.realtime.run_virtual_profile_realtime`, the realistic one: the drive
     emulator and the pantograph FMU in a background thread, default real-time settings
     (lenient drive timing, 0.5 ms thread switch interval, frozen GC heap).
     ``loop_alone``: the same loop with a null drive (frames encoded and sent on a virtual bus,
@@ -50,7 +50,7 @@ import numpy as np
 HERE = Path(__file__).parent
 sys.path.insert(0, str(HERE.parent))
 
-from rig.clock import RealClock  # noqa: E402
+from panto.rig.clock import RealClock  # noqa: E402
 
 PERIOD = 0.002
 CASES = ("emulated", "loop_alone", "faithful_drive", "cpython_defaults")
@@ -72,15 +72,15 @@ class RecordingClock(RealClock):
 # --- the loop alone: a null drive and trivial I/O -------------------------------------------
 
 class NullDrive:
-    """Duck-typed :class:`rig.drive.LinearMotorDriver`: encodes and sends the stream frames on a
+    """Duck-typed :class:`panto.rig.drive.LinearMotorDriver`: encodes and sends the stream frames on a
     bus, never waits for replies, reports a drive in operation at the last commanded position."""
 
     def __init__(self, bus) -> None:
         self._bus, self._count, self._position = bus, 0, 0.0
 
     def _feedback(self, state: int):
-        from rig.can_protocol import StatusWord, WarnWord
-        from rig.drive import DriveFeedback
+        from panto.rig.can_protocol import StatusWord, WarnWord
+        from panto.rig.drive import DriveFeedback
 
         return DriveFeedback(time=time.monotonic(), status_word=StatusWord(0), main_state=state,
                              command_count_echo=self._count, actual_position=self._position,
@@ -94,8 +94,8 @@ class NullDrive:
         return self._feedback(8)
 
     def stream(self, position: float) -> None:
-        from rig.can_protocol import CONTROL_WORD_RUNNING, STREAM_MASTER_ID, StreamCommand
-        from rig.can_protocol import setpoint_frame, sync_frame
+        from panto.rig.can_protocol import CONTROL_WORD_RUNNING, STREAM_MASTER_ID, StreamCommand
+        from panto.rig.can_protocol import setpoint_frame, sync_frame
 
         self._count, self._position = (self._count + 1) % 16, position
         self._bus.send(setpoint_frame(CONTROL_WORD_RUNNING, master_id=STREAM_MASTER_ID,
@@ -146,8 +146,8 @@ def null_consumer(channel: str):
 def run_loop_alone(profile, folder: Path, clock: RecordingClock):
     import can
 
-    from rig.realtime import RealtimeOptions, realtime_interpreter
-    from rig.session import RunOptions, run_profile
+    from panto.rig.realtime import RealtimeOptions, realtime_interpreter
+    from panto.rig.session import RunOptions, run_profile
 
     channel = f"benchmark-null-{os.getpid()}"
     with null_consumer(channel), can.Bus(interface="virtual", channel=channel) as bus, \
@@ -173,7 +173,7 @@ def run_case(case: str, profile, fmu: Path, folder: Path, say, *, attempts: int 
 
 
 def _run_once(case: str, profile, fmu: Path, folder: Path, say) -> dict:
-    from rig.realtime import RealtimeOptions, run_virtual_profile_realtime
+    from panto.rig.realtime import RealtimeOptions, run_virtual_profile_realtime
 
     clock = RecordingClock()
     load_before = os.getloadavg()
@@ -363,8 +363,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"unknown case(s) {sorted(unknown)}" if unknown
                      else f"--duration must be > 0, got {args.duration}")
 
-    from build_fmu.project import build_project_fmus
-    from rig.profiles import load_profile
+    from panto.build_fmu.project import build_project_fmus
+    from panto.rig.profiles import load_profile
 
     profile_path = HERE.parent / "rig" / "profiles" / "aprbs_training.json"
     profile = dataclasses.replace(load_profile(profile_path), duration=args.duration)

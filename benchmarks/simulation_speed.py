@@ -44,8 +44,8 @@ def rig_excitation(duration: float) -> tuple:
 
     import numpy as np
 
-    from rig.profile_preview import conditioned_command
-    from rig.profiles import load_profile, render_profile
+    from panto.rig.profile_preview import conditioned_command
+    from panto.rig.profiles import load_profile, render_profile
 
     profile = replace(load_profile(files("rig") / "profiles" / "aprbs_training.json"),
                       duration=duration)
@@ -56,9 +56,9 @@ def rig_excitation(duration: float) -> tuple:
 
 
 def measure_simulation(fmus: Path, python_seconds: float) -> dict:
-    from build_fmu.simulate import FmuSimulator
-    from fmu_src.models import Model
-    from fmu_src.simulation import simulate_model
+    from panto.build_fmu.simulate import FmuSimulator
+    from panto.fmu_src.models import Model
+    from panto.fmu_src.simulation import simulate_model
     t, inputs = rig_excitation(60.0)
     results = {}
     for interface in ("CS", "ME"):

@@ -36,11 +36,11 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from rig.dataset import Dataset, RunMetadata  # noqa: E402
-from video_sync.camera import CameraSetup, render_run  # noqa: E402
-from video_sync.setup import setup_from_camera  # noqa: E402
-from video_sync.tracking import track_video  # noqa: E402
-from video_sync.video_io import _decoded, read_frame_views  # noqa: E402
+from panto.rig.dataset import Dataset, RunMetadata  # noqa: E402
+from panto.video_sync.camera import CameraSetup, render_run  # noqa: E402
+from panto.video_sync.setup import setup_from_camera  # noqa: E402
+from panto.video_sync.tracking import track_video  # noqa: E402
+from panto.video_sync.video_io import _decoded, read_frame_views  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 

@@ -3,7 +3,7 @@
 Public entry points:
 
 - :func:`build_fmu` — build one FMU (FMI 2.0 or 3.0, Model Exchange and Co-Simulation) from a
-  :class:`fmu_src.spec.ModelSpec`;
+  :class:`panto.fmu_src.spec.ModelSpec`;
 - :func:`validate_fmu` — the problems fmpy's validator finds in an FMU.
 """
 from .build import build_fmu, derive_instantiation_token, make_fmu_file_name

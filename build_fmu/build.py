@@ -1,4 +1,4 @@
-"""Build an FMU from a :class:`~fmu_src.spec.ModelSpec`: the one entry point of the package.
+"""Build an FMU from a :class:`~panto.fmu_src.spec.ModelSpec`: the one entry point of the package.
 
 Phases: lay out the variables → derive the instantiation token → write the model description
 (and, for FMI 3.0, the build description) → write the C sources → compile → zip.
@@ -10,7 +10,7 @@ import logging
 import tempfile
 from pathlib import Path
 
-from fmu_src.spec import ModelSpec
+from panto.fmu_src.spec import ModelSpec
 
 from .compile import compile_library, read_runtime_sources, write_sources
 from .configuration import write_model_config
@@ -89,7 +89,7 @@ def build_fmu(spec: ModelSpec, out_dir: str | Path, *, fmi_version: int) -> Path
     ------
     ValueError
         For an unknown FMI version or an inconsistent spec (names, units, ranges).
-    build_fmu.compile.CompilationError
+    panto.build_fmu.compile.CompilationError
         If the C code does not compile; the message holds the compiler output.
     """
     if fmi_version not in (2, 3):

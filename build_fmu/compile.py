@@ -12,7 +12,7 @@ import shutil
 import subprocess
 from pathlib import Path
 
-from fmu_src.spec import RUNTIME_DIR
+from panto.fmu_src.spec import RUNTIME_DIR
 
 LOGGER = logging.getLogger(__name__)
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 import math
 
-from fmu_src.spec import ModelSpec
+from panto.fmu_src.spec import ModelSpec
 
 from .variables import FmuVariable
 
@@ -68,7 +68,7 @@ def write_model_config(spec: ModelSpec, variables: tuple[FmuVariable, ...], toke
     spec : ModelSpec
         The model (its identifier and whether it is linearised).
     variables : tuple of FmuVariable
-        The variable table from :func:`build_fmu.variables.layout_variables`.
+        The variable table from :func:`panto.build_fmu.variables.layout_variables`.
     token : str
         The GUID / instantiation token written into the modelDescription.xml.
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import xml.etree.ElementTree as ElementTree
 
-from fmu_src.spec import ModelSpec
+from panto.fmu_src.spec import ModelSpec
 
 from .variables import FmuVariable, list_dependencies
 from .xml_writing import (GENERATION_TOOL, add_default_experiment, add_log_categories,
@@ -108,7 +108,7 @@ def write_model_description_fmi2(spec: ModelSpec, variables: tuple[FmuVariable, 
     spec : ModelSpec
         The model.
     variables : tuple of FmuVariable
-        Its variable table (:func:`build_fmu.variables.layout_variables`).
+        Its variable table (:func:`panto.build_fmu.variables.layout_variables`).
     token : str
         The GUID, ``{8-4-4-4-12}`` hexadecimal.
     source_files : tuple of str

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import xml.etree.ElementTree as ElementTree
 
-from fmu_src.spec import ModelSpec
+from panto.fmu_src.spec import ModelSpec
 
 from .variables import FmuVariable, list_dependencies
 from .xml_writing import (GENERATION_TOOL, add_default_experiment, add_log_categories,
@@ -99,7 +99,7 @@ def write_model_description_fmi3(spec: ModelSpec, variables: tuple[FmuVariable, 
     spec : ModelSpec
         The model.
     variables : tuple of FmuVariable
-        Its variable table (:func:`build_fmu.variables.layout_variables`).
+        Its variable table (:func:`panto.build_fmu.variables.layout_variables`).
     token : str
         The instantiation token.
 

@@ -1,7 +1,7 @@
-"""FMI plumbing under :mod:`build_fmu.simulate`: log collection, batched float get/set,
+"""FMI plumbing under :mod:`panto.build_fmu.simulate`: log collection, batched float get/set,
 piecewise-linear inputs and fmpy's CVODE solver made to report a failing FMU call.
 
-None of it knows about a particular model; :class:`build_fmu.simulate.FmuSimulator` puts it
+None of it knows about a particular model; :class:`panto.build_fmu.simulate.FmuSimulator` puts it
 together.
 """
 from __future__ import annotations

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Sequence
 
-from fmu_src.models import FMU_NAMES, model_spec
+from panto.fmu_src.models import FMU_NAMES, model_spec
 
 from .build import build_fmu
 from .validate import validate_fmu

@@ -40,7 +40,7 @@ from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.simulation import instantiate_fmu
 
-from fmu_src.response import TimeResponse
+from panto.fmu_src.response import TimeResponse
 
 from .fmi_plumbing import (STATUS_LABELS, FloatChannel, LogCollector, PiecewiseLinearInputs,
                            make_cvode_solver)
@@ -182,7 +182,7 @@ class FmuSimulator:
     Examples
     --------
     >>> import numpy as np
-    >>> from build_fmu.simulate import FmuSimulator
+    >>> from panto.build_fmu.simulate import FmuSimulator
     >>> time = np.linspace(0.0, 2.0, 401)
     >>> with FmuSimulator("Toy.fmu", interface="ME") as simulator:  # doctest: +SKIP
     ...     for k in (4000.0, 5000.0, 6000.0):
@@ -610,7 +610,7 @@ def simulate_fmu_with_inputs(fmu_path: str | Path, time: Sequence[float] | np.nd
     Examples
     --------
     >>> import numpy as np
-    >>> from build_fmu.simulate import simulate_fmu_with_inputs
+    >>> from panto.build_fmu.simulate import simulate_fmu_with_inputs
     >>> time = np.linspace(0.0, 1.0, 201)
     >>> response = simulate_fmu_with_inputs("Toy.fmu", time, {"eta": 0.01 * time},
     ...                                     parameters={"k": 5000.0})  # doctest: +SKIP

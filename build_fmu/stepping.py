@@ -1,6 +1,6 @@
 """Drive one FMU instance step by step: for co-simulation masters and the rig's virtual test bed.
 
-:class:`build_fmu.simulate.FmuSimulator` runs whole simulations with known input series. A
+:class:`panto.build_fmu.simulate.FmuSimulator` runs whole simulations with known input series. A
 co-simulation master does not know the inputs in advance: at every communication point it sets
 the inputs it has just computed, advances the FMU by one step and reads the outputs back.
 :class:`FmuStepper` does exactly that, about ten thousand times per run, so the hot path uses
@@ -26,13 +26,13 @@ feed-through output (e.g. a contact force ``k (xi - eta)``) is reported for the 
 just taken; a master that wants it for new inputs sets them first (:meth:`FmuStepper.set_inputs`).
 
 Errors
-    A failing FMI call raises :class:`build_fmu.simulate.SimulationError` carrying the function
+    A failing FMI call raises :class:`panto.build_fmu.simulate.SimulationError` carrying the function
     name, the status, the time and the FMU's last log lines. Names the FMU does not have raise
-    :class:`build_fmu.simulate.UnknownVariableError` (a ``ValueError``) listing the valid names.
+    :class:`panto.build_fmu.simulate.UnknownVariableError` (a ``ValueError``) listing the valid names.
 
 Examples
 --------
->>> from build_fmu.stepping import FmuStepper
+>>> from panto.build_fmu.stepping import FmuStepper
 >>> with FmuStepper("TwoMass.fmu", step_size=1e-3, inputs=["eta"],
 ...                 outputs=["xi", "F_c"]) as stepper:           # doctest: +SKIP
 ...     y = stepper.initialise({"eta": 0.0})

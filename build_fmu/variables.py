@@ -14,7 +14,7 @@ import math
 import re
 from dataclasses import dataclass
 
-from fmu_src.spec import ModelSpec
+from panto.fmu_src.spec import ModelSpec
 
 from .units import divide_unit_by_time
 

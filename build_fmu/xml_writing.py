@@ -5,7 +5,7 @@ import math
 import xml.etree.ElementTree as ElementTree
 from dataclasses import dataclass
 
-from fmu_src.spec import ModelSpec
+from panto.fmu_src.spec import ModelSpec
 
 from .units import collect_unit_definitions
 from .variables import LOG_CATEGORIES, FmuVariable

@@ -1,9 +1,9 @@
 """The finite-difference catenary: a two-wire simple catenary driven by a moving contact force.
 
 `Catenary` is the object the co-simulation master steps: it builds the mesh
-(`catenary_cosim.mesh`), solves the static pre-state with the designed contact-wire heights
-(`catenary_cosim.static`) and advances the dynamics about it with the implicit average-acceleration
-Newmark rule, factorised once, with tension-only droppers (`catenary_cosim.integration`).
+(`panto.catenary_cosim.mesh`), solves the static pre-state with the designed contact-wire heights
+(`panto.catenary_cosim.static`) and advances the dynamics about it with the implicit average-acceleration
+Newmark rule, factorised once, with tension-only droppers (`panto.catenary_cosim.integration`).
 
 Modelling choices (see the line files for the data):
 
@@ -29,10 +29,10 @@ from typing import Callable
 
 import numpy as np
 
-from catenary_cosim.integration import NewmarkIntegrator, SlackDropperSolver
-from catenary_cosim.lines import LineDefinition
-from catenary_cosim.mesh import build_mesh
-from catenary_cosim.static import StaticState, solve_static_state
+from panto.catenary_cosim.integration import NewmarkIntegrator, SlackDropperSolver
+from panto.catenary_cosim.lines import LineDefinition
+from panto.catenary_cosim.mesh import build_mesh
+from panto.catenary_cosim.static import StaticState, solve_static_state
 
 DEFAULT_ELEMENT_LENGTH = 0.25  # [m], from benchmarks/catenary_convergence.py
 
@@ -43,7 +43,7 @@ class Catenary:
     Parameters
     ----------
     line : LineDefinition
-        The overhead line (`catenary_cosim.lines.load_line`).
+        The overhead line (`panto.catenary_cosim.lines.load_line`).
     time_step : float
         Fixed step [s].
     element_length : float
@@ -55,7 +55,7 @@ class Catenary:
 
     Examples
     --------
-    >>> from catenary_cosim.lines import load_line
+    >>> from panto.catenary_cosim.lines import load_line
     >>> catenary = Catenary(load_line("en50318-2002"), time_step=1e-3)
     >>> catenary.advance(120.0, 250.0)
     >>> round(catenary.contact_wire_height(250.0), 2)

@@ -43,7 +43,7 @@ MODEL_NAME = "CatenaryFMU"
 
 
 class CatenaryFMU(Fmi2Slave):
-    """pythonfmu slave wrapping :class:`catenary_cosim.catenary.Catenary` (see module notes)."""
+    """pythonfmu slave wrapping :class:`panto.catenary_cosim.catenary.Catenary` (see module notes)."""
 
     author = "panto"
     description = ("Finite-difference two-wire simple catenary (contact and messenger wire, "
@@ -86,8 +86,8 @@ class CatenaryFMU(Fmi2Slave):
 
     def exit_initialization_mode(self) -> None:
         """Build the catenary (mesh, static pre-state, factorisation) from the parameters."""
-        from catenary_cosim.catenary import Catenary
-        from catenary_cosim.lines import load_line
+        from panto.catenary_cosim.catenary import Catenary
+        from panto.catenary_cosim.lines import load_line
 
         self._catenary = Catenary(load_line(self.line), time_step=float(self.time_step),
                                   element_length=float(self.element_length),

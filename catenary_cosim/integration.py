@@ -43,7 +43,7 @@ import numpy as np
 import scipy.sparse as sparse
 from scipy.linalg import lapack
 
-from catenary_cosim.mesh import Mesh, banded_upper
+from panto.catenary_cosim.mesh import Mesh, banded_upper
 
 BLOCK_PIVOTING_ITERATIONS = 20
 MAX_ACTIVE_SET_ITERATIONS = 2000
@@ -216,7 +216,7 @@ class NewmarkIntegrator:
         return self._stretch
 
     def energy(self) -> dict[str, float]:
-        """Energy relative to the pre-state [J] (see `catenary_cosim.catenary.Catenary.energy`)."""
+        """Energy relative to the pre-state [J] (see `panto.catenary_cosim.catenary.Catenary.energy`)."""
         u, mesh = self.displacement, self.mesh
         k, e0 = self.solver.stiffness, self.solver.elongations
         e = self.stretch()

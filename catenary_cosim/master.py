@@ -130,8 +130,8 @@ class CosimulationResult:
         return lowpass_filter(self.contact_force, sample_rate(self.time))
 
     def to_response(self, every: int = 1) -> Any:
-        """The time series as a :class:`fmu_src.response.TimeResponse` (every n-th sample)."""
-        from fmu_src.response import TimeResponse
+        """The time series as a :class:`panto.fmu_src.response.TimeResponse` (every n-th sample)."""
+        from panto.fmu_src.response import TimeResponse
 
         rows = slice(None, None, max(1, int(every)))
         signals = {"position": self.position, "contact_force": self.contact_force,
@@ -201,7 +201,7 @@ def cosimulate(line: Any, pantograph: PantographSetup | str, *, speed_kmh: float
     section : (float, float), optional
         Analysed section (m) (default: the line's analysed spans).
     interface : {"CS", "ME"}, optional
-        How the FMU is driven (:class:`build_fmu.stepping.FmuStepper`).
+        How the FMU is driven (:class:`panto.build_fmu.stepping.FmuStepper`).
     fmu_cache : path, optional
         Folder for project FMUs built on demand.
     check_coupling : bool, optional
@@ -213,7 +213,7 @@ def cosimulate(line: Any, pantograph: PantographSetup | str, *, speed_kmh: float
     -------
     CosimulationResult
     """
-    from build_fmu.stepping import FmuStepper
+    from panto.build_fmu.stepping import FmuStepper
 
     say = progress or (lambda text: None)
     setup = pantograph_setup(pantograph) if isinstance(pantograph, str) else pantograph

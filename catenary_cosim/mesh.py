@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sparse
 
-from catenary_cosim.lines import LineDefinition
+from panto.catenary_cosim.lines import LineDefinition
 
 GRAVITY = 9.81  # [m/s^2]
 HALF_BANDWIDTH = 4

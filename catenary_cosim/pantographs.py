@@ -221,7 +221,7 @@ def pantograph_setup(name: str, *, pressure_bar: float | None = None) -> Pantogr
                      f"{pressure:g} bar"),
         parameters=(("eta0", PHYSICAL_REFERENCE_HEIGHT), ("p0", pressure)) if linear else (),
         constant_inputs=(("p", pressure),), reference_height=PHYSICAL_REFERENCE_HEIGHT,
-        provenance="thesis Table 4.1 parameters (fmu_src.pantograph); pressure: user")
+        provenance="thesis Table 4.1 parameters (panto.fmu_src.pantograph); pressure: user")
 
 
 def _oscillator_setup(name: str) -> PantographSetup:
@@ -261,16 +261,16 @@ def user_pantograph(fmu_path: str | Path, *, height_input: str, force_output: st
         unilateral_parameter=unilateral_parameter, provenance="user")
 
 
-# --- project FMUs built on demand (shared with the rig: build_fmu.project) ---------------------
+# --- project FMUs built on demand (shared with the rig: panto.build_fmu.project) ---------------------
 
 def project_fmu(name: str, *, cache_dir: str | Path | None = None,
                 progress: Callable[[str], None] | None = None) -> Path:
     """The FMI 2.0 FMU of a project model, built on demand into the cache folder.
 
-    See :func:`build_fmu.project.project_fmu` (``$PANTO_FMU_CACHE`` or ``~/.cache/panto/fmus``,
+    See :func:`panto.build_fmu.project.project_fmu` (``$PANTO_FMU_CACHE`` or ``~/.cache/panto/fmus``,
     a sub-folder per source version; built in a scratch folder and moved into place).
     """
-    from build_fmu.project import project_fmu as build_or_find
+    from panto.build_fmu.project import project_fmu as build_or_find
 
     return build_or_find(name, cache_dir=cache_dir, progress=progress)
 

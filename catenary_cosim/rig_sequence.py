@@ -20,8 +20,8 @@ contact-wire deflection, passive pantograph). :func:`make_rig_sequence` produces
    the filtered period is periodic too).
 
 The CSV has the columns ``time [s]`` and ``contact_wire_displacement [m]``
-(:meth:`fmu_src.response.TimeResponse.to_csv`), which the rig's signal generator replays
-(``rig.signals.Replay``); the JSON beside it (``<file>.csv.json``) holds the units, the period,
+(:meth:`panto.fmu_src.response.TimeResponse.to_csv`), which the rig's signal generator replays
+(``panto.rig.signals.Replay``); the JSON beside it (``<file>.csv.json``) holds the units, the period,
 the line, speed and pantograph and how the sequence was made.
 """
 from __future__ import annotations
@@ -106,9 +106,9 @@ def make_rig_sequence(path: str | Path, *, line: str = "thesis-60m", speed_kmh: 
     -------
     pathlib.Path
         The CSV written (its metadata in ``<path>.json``: see
-        :func:`fmu_src.response.metadata_path_for`).
+        :func:`panto.fmu_src.response.metadata_path_for`).
     """
-    from fmu_src.response import TimeResponse
+    from panto.fmu_src.response import TimeResponse
 
     setup = pantograph_setup("physical") if pantograph is None else (
         pantograph_setup(pantograph) if isinstance(pantograph, str) else pantograph)

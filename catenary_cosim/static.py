@@ -35,8 +35,8 @@ import numpy as np
 import scipy.sparse as sparse
 from scipy.sparse.linalg import splu
 
-from catenary_cosim.lines import LineDefinition
-from catenary_cosim.mesh import Mesh
+from panto.catenary_cosim.lines import LineDefinition
+from panto.catenary_cosim.mesh import Mesh
 
 
 @dataclass(frozen=True)
@@ -82,7 +82,7 @@ def solve_static_state(line: LineDefinition, mesh: Mesh) -> StaticState:
     ----------
     line : LineDefinition
     mesh : Mesh
-        The finite-difference model of ``line`` (`catenary_cosim.mesh.build_mesh`).
+        The finite-difference model of ``line`` (`panto.catenary_cosim.mesh.build_mesh`).
 
     Returns
     -------

@@ -19,7 +19,7 @@ error message.
 
 Examples
 --------
->>> from catenary_cosim.sweeps import speed_sweep
+>>> from panto.catenary_cosim.sweeps import speed_sweep
 >>> results = speed_sweep("en50318-2002", "en50318-2002", [200, 250, 300])   # doctest: +SKIP
 >>> from distributed import Client, LocalCluster                            # doctest: +SKIP
 >>> with LocalCluster(n_workers=2, processes=True) as cluster, Client(cluster) as client:

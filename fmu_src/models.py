@@ -2,7 +2,7 @@
 
 Examples
 --------
->>> from fmu_src.models import Model
+>>> from panto.fmu_src.models import Model
 >>> pantograph = Model("Pantograph")
 >>> x0 = pantograph.equilibrium(eta=2.0, p=4.0)
 >>> round(float(pantograph.outputs(x0, eta=2.0, p=4.0)[2]))   # contact force [N]
@@ -15,13 +15,13 @@ from pathlib import Path
 
 import numpy as np
 
-from fmu_src.codegen import generate_c_code
-from fmu_src.numeric import LinearisedModel, ModelEvaluationError, NumericModel
-from fmu_src.oscillators import derive_oscillator
-from fmu_src.pantograph import PHI1_SEARCH_RANGE, derive_pantograph
-from fmu_src.parameters import ParameterError, ParameterSet
-from fmu_src.spec import ModelSpec
-from fmu_src.symbolic import MechanicalModel
+from panto.fmu_src.codegen import generate_c_code
+from panto.fmu_src.numeric import LinearisedModel, ModelEvaluationError, NumericModel
+from panto.fmu_src.oscillators import derive_oscillator
+from panto.fmu_src.pantograph import PHI1_SEARCH_RANGE, derive_pantograph
+from panto.fmu_src.parameters import ParameterError, ParameterSet
+from panto.fmu_src.spec import ModelSpec
+from panto.fmu_src.symbolic import MechanicalModel
 
 #: Models by name, each with the function that derives it.
 DERIVATIONS = {

@@ -1,7 +1,7 @@
 """The symbolic models as fast Python functions: right-hand side, equilibrium, linearisation.
 
 This is the Python path for fitting scripts. It is compiled (``sympy.lambdify``) from the same
-:class:`~fmu_src.symbolic.MechanicalModel` as the C code of the FMUs, so the two paths share the
+:class:`~panto.fmu_src.symbolic.MechanicalModel` as the C code of the FMUs, so the two paths share the
 equations but not the code that evaluates them.
 """
 from __future__ import annotations
@@ -13,7 +13,7 @@ import numpy as np
 import sympy as sp
 from scipy import linalg, optimize
 
-from fmu_src.symbolic import MechanicalModel
+from panto.fmu_src.symbolic import MechanicalModel
 
 
 class ModelEvaluationError(ValueError):
@@ -83,7 +83,7 @@ class NumericModel:
     Notes
     -----
     All methods take the parameter vector ``p`` in the order of ``model.parameters`` (see
-    :meth:`fmu_src.parameters.ParameterSet.vector`).
+    :meth:`panto.fmu_src.parameters.ParameterSet.vector`).
     """
 
     def __init__(self, model: MechanicalModel):

@@ -21,8 +21,8 @@ from functools import lru_cache
 
 import sympy as sp
 
-from fmu_src.spec import ParameterSpec, Variable
-from fmu_src.symbolic import MechanicalModel
+from panto.fmu_src.spec import ParameterSpec, Variable
+from panto.fmu_src.symbolic import MechanicalModel
 
 _EN = "EN 50318:2002 reference pantograph [2nd], reference/catenary_en50318.md"
 _BRUNI = "Bruni et al. 2015 benchmark pantograph [2nd/recall], reference/catenary_en50318.md"

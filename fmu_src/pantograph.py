@@ -21,8 +21,8 @@ from math import pi
 
 import sympy as sp
 
-from fmu_src.spec import ParameterSpec, Variable
-from fmu_src.symbolic import Dependent, Guard, MechanicalModel, lagrangian_forces, total_derivative
+from panto.fmu_src.spec import ParameterSpec, Variable
+from panto.fmu_src.symbolic import Dependent, Guard, MechanicalModel, lagrangian_forces, total_derivative
 
 _T21 = "thesis Table 2.1 (dimensions of the test pantograph)"
 _T41 = "thesis Table 4.1 (identified, section 4.5)"

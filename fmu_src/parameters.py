@@ -20,7 +20,7 @@ from typing import Mapping
 
 import numpy as np
 
-from fmu_src.spec import ParameterSpec
+from panto.fmu_src.spec import ParameterSpec
 
 
 class ParameterError(ValueError):
@@ -42,7 +42,7 @@ class ParameterSet:
 
     Examples
     --------
-    >>> from fmu_src.models import default_parameters
+    >>> from panto.fmu_src.models import default_parameters
     >>> params = default_parameters("Pantograph").with_values(k_ph=50000.0)
     >>> params["k_ph"]
     50000.0

@@ -123,7 +123,7 @@ class TimeResponse:
     Examples
     --------
     >>> import numpy as np
-    >>> from fmu_src.response import TimeResponse
+    >>> from panto.fmu_src.response import TimeResponse
     >>> t = np.linspace(0.0, 1.0, 5)
     >>> response = TimeResponse(t, {"x": 0.01 * t, "F_c": 100.0 + 0 * t},
     ...                         units={"x": "m", "F_c": "N"}, metadata={"model": "Toy"})
@@ -225,7 +225,7 @@ class TimeResponse:
 
         Examples
         --------
-        >>> from fmu_src.response import TimeResponse
+        >>> from panto.fmu_src.response import TimeResponse
         >>> df = TimeResponse([0.0, 1.0], {"F_c": [90.0, 110.0]}, units={"F_c": "N"}).to_pandas()
         >>> df.attrs["units"]["F_c"]
         'N'
@@ -262,7 +262,7 @@ class TimeResponse:
         Examples
         --------
         >>> import tempfile, pathlib
-        >>> from fmu_src.response import TimeResponse
+        >>> from panto.fmu_src.response import TimeResponse
         >>> response = TimeResponse([0.0, 0.5], {"F_c": [90.0, 110.0]}, units={"F_c": "N"})
         >>> path = response.to_csv(pathlib.Path(tempfile.mkdtemp()) / "contact.csv")
         >>> path.read_text().splitlines()[0]
@@ -370,7 +370,7 @@ class TimeResponse:
         Examples
         --------
         >>> import numpy as np
-        >>> from fmu_src.response import TimeResponse
+        >>> from panto.fmu_src.response import TimeResponse
         >>> response = TimeResponse([0.0, 2.0], {"x": [0.0, 4.0]}, units={"x": "m"})
         >>> response.resample([0.5, 1.0])["x"].tolist()
         [1.0, 2.0]
@@ -422,7 +422,7 @@ class TimeResponse:
         Examples
         --------
         >>> import numpy as np
-        >>> from fmu_src.response import TimeResponse
+        >>> from panto.fmu_src.response import TimeResponse
         >>> t = np.linspace(0.0, 1.0, 11)
         >>> measured = TimeResponse(t, {"x": t, "F_c": 1 + t}, units={"x": "m", "F_c": "N"})
         >>> fig = measured.plot(label="measured")
@@ -486,7 +486,7 @@ class TimeResponse:
         Examples
         --------
         >>> import tempfile, pathlib
-        >>> from fmu_src.response import TimeResponse
+        >>> from panto.fmu_src.response import TimeResponse
         >>> response = TimeResponse([0.0, 1.0], {"F_c": [90.0, 110.0]}, units={"F_c": "N"})
         >>> response.save_plot(pathlib.Path(tempfile.mkdtemp()) / "contact.png").suffix
         '.png'

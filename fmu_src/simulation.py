@@ -1,6 +1,6 @@
 """Simulation of the models on the Python path (SciPy's ``solve_ivp``).
 
-The inputs are sampled signals, linear between samples (as :mod:`build_fmu.simulate` feeds the
+The inputs are sampled signals, linear between samples (as :mod:`panto.build_fmu.simulate` feeds the
 FMUs) or held constant between samples (``interpolation="hold"``). The integration restarts at
 every sample so that the kinks or steps of the inputs do not spoil the error control.
 """
@@ -11,8 +11,8 @@ from typing import Mapping
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from fmu_src.models import Model
-from fmu_src.response import TimeResponse
+from panto.fmu_src.models import Model
+from panto.fmu_src.response import TimeResponse
 
 
 def simulate_model(

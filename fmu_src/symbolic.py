@@ -21,7 +21,7 @@ from functools import cached_property
 
 import sympy as sp
 
-from fmu_src.spec import ParameterSpec, Variable
+from panto.fmu_src.spec import ParameterSpec, Variable
 
 
 @dataclass(frozen=True)

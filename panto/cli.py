@@ -16,7 +16,7 @@ def _say(line: str) -> None:
 
 def run_build_fmu(args: argparse.Namespace) -> int:
     """Build, validate and list the FMUs."""
-    from build_fmu.project import build_project_fmus
+    from panto.build_fmu.project import build_project_fmus
 
     built = build_project_fmus(args.out, names=args.models or _all_fmus(),
                                fmi_versions=args.fmi_version, progress=_say)
@@ -27,14 +27,14 @@ def run_build_fmu(args: argparse.Namespace) -> int:
 
 
 def _all_fmus():
-    from fmu_src.models import FMU_NAMES
+    from panto.fmu_src.models import FMU_NAMES
 
     return FMU_NAMES
 
 
 def run_linearise(args: argparse.Namespace) -> int:
     """Static equilibrium and linearisation about an operating point."""
-    from fmu_src.models import Model, load_parameters
+    from panto.fmu_src.models import Model, load_parameters
 
     params = load_parameters(args.parameters, args.model) if args.parameters else None
     model = Model(args.model, params)
@@ -58,7 +58,7 @@ def run_linearise(args: argparse.Namespace) -> int:
 
 def run_parameters(args: argparse.Namespace) -> int:
     """Write a model's default parameter file (values, units, bounds, provenance)."""
-    from fmu_src.models import default_parameters
+    from panto.fmu_src.models import default_parameters
 
     path = default_parameters(args.model).save(args.out)
     _say(f"wrote {path}")

@@ -23,8 +23,8 @@ def _say(line: str) -> None:
 
 def run_compare(args: argparse.Namespace) -> int:
     """Fit the structures on TRAIN, validate on VALIDATION, print and write the table."""
-    from identification.comparison import compare_structures, plot_comparison, plot_validation
-    from identification.data import pantograph_data
+    from panto.identification.estimation.comparison import compare_structures, plot_comparison, plot_validation
+    from panto.identification.data.datasets import pantograph_data
 
     train = pantograph_data(args.train, rate=args.rate)
     validation = pantograph_data(args.validation, rate=args.rate)
@@ -54,7 +54,7 @@ def run_compare(args: argparse.Namespace) -> int:
 
 def _save_parameters(table, folder: Path) -> None:
     """The physical structures' identified parameters as files the FMUs accept."""
-    from fmu_src.models import default_parameters
+    from panto.fmu_src.models import default_parameters
 
     names = set(default_parameters("Pantograph").names)
     for row in table.rows:
@@ -66,9 +66,9 @@ def _save_parameters(table, folder: Path) -> None:
 
 def run_sensitivity(args: argparse.Namespace) -> int:
     """Eigenvalues of the linearised model with each parameter scaled (thesis Fig. 4.9)."""
-    from fmu_src.models import default_parameters
-    from fmu_src.parameters import ParameterSet
-    from identification.sensitivity import (TABLE_4_1, eigenvalue_sensitivity,
+    from panto.fmu_src.models import default_parameters
+    from panto.fmu_src.parameters import ParameterSet
+    from panto.identification.structures.sensitivity import (TABLE_4_1, eigenvalue_sensitivity,
                                             plot_eigenvalue_sensitivity)
 
     # The file is read against the pantograph's specs (units, bounds); whether the linkage

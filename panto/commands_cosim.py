@@ -23,7 +23,7 @@ def _say(line: str) -> None:
 
 
 def _setup(args: argparse.Namespace):
-    from catenary_cosim.pantographs import pantograph_setup, user_pantograph
+    from panto.catenary_cosim.pantographs import pantograph_setup, user_pantograph
 
     if args.fmu and not args.pantograph:
         return user_pantograph(args.fmu, height_input=args.height_input,
@@ -34,7 +34,7 @@ def _setup(args: argparse.Namespace):
 
 
 def _print_statistics(statistics: dict[str, float]) -> None:
-    from catenary_cosim.validation import LABELS
+    from panto.catenary_cosim.validation import LABELS
 
     for key, value in statistics.items():
         _say(f"  {LABELS[key]:<32} {value:10.2f}")
@@ -43,13 +43,13 @@ def _print_statistics(statistics: dict[str, float]) -> None:
 def run_cosim(args: argparse.Namespace) -> int:
     """Dispatch to the job asked for (module notes)."""
     if args.build_catenary_fmu:
-        from catenary_cosim.catenary_fmu import build_catenary_fmu
+        from panto.catenary_cosim.catenary_fmu import build_catenary_fmu
 
         _say(f"wrote {build_catenary_fmu(args.build_catenary_fmu)} (needs Python with the "
              "panto package on the importing side)")
         return 0
     if args.rig_sequence:
-        from catenary_cosim.rig_sequence import make_rig_sequence
+        from panto.catenary_cosim.rig_sequence import make_rig_sequence
 
         path = make_rig_sequence(args.rig_sequence, line=args.line or "thesis-60m",
                                  speed_kmh=args.speed or 300.0,
@@ -63,7 +63,7 @@ def run_cosim(args: argparse.Namespace) -> int:
 
 
 def _validate(args: argparse.Namespace) -> int:
-    from catenary_cosim.validation import validate_en50318
+    from panto.catenary_cosim.validation import validate_en50318
 
     if not args.out:
         raise ValueError("--validate-en50318 needs --out DIR")
@@ -76,7 +76,7 @@ def _validate(args: argparse.Namespace) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from catenary_cosim.master import cosimulate
+    from panto.catenary_cosim.master import cosimulate
 
     if args.speed is None:
         raise ValueError("give the running speed with --speed KMH")

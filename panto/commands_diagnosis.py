@@ -85,8 +85,8 @@ def read_table(path: str | Path) -> dict[str, np.ndarray]:
 
 def load_data(path: str, args: argparse.Namespace, rows: slice):
     """IdentificationData of one run from the options (module notes)."""
-    from identification.base import IdentificationData
-    from identification.data import data_from_dataset, pantograph_data
+    from panto.identification.estimation.base import IdentificationData
+    from panto.identification.data.datasets import data_from_dataset, pantograph_data
 
     inputs, outputs = _pairs(args.inputs, "--inputs"), _pairs(args.outputs, "--outputs")
     if not inputs and not outputs and args.model in PANTOGRAPH_MODELS:
@@ -95,7 +95,7 @@ def load_data(path: str, args: argparse.Namespace, rows: slice):
     if not inputs or not outputs:
         raise ValueError("--inputs and --outputs name the columns (NAME=CHANNEL) for this data")
     try:
-        from rig.dataset import read_dataset
+        from panto.rig.dataset import read_dataset
 
         dataset = read_dataset(path, required=())
     except Exception:  # not a dataset of this product: a plain table
@@ -137,7 +137,7 @@ def _decimate(t: np.ndarray, u: np.ndarray, y: np.ndarray, rate: float):
 def _slice(data, rows: slice):
     if rows == slice(None):
         return data
-    from identification.base import IdentificationData
+    from panto.identification.estimation.base import IdentificationData
 
     return IdentificationData(data.time[rows], data.inputs[rows], data.outputs[rows],
                               data.input_names, data.output_names, data.units, data.source,
@@ -147,7 +147,7 @@ def _slice(data, rows: slice):
 def _roles(text: str | None):
     if not text:
         return None
-    from identification.effects import SignalRoles
+    from panto.identification.diagnosis.effects import SignalRoles
 
     values = _pairs([text], "--roles")
     actuators = tuple(a for a in values.pop("actuators", "").split("+") if a)
@@ -161,9 +161,9 @@ def _roles(text: str | None):
 
 def run_diagnose(args: argparse.Namespace) -> int:
     """Load both runs, diagnose, print the verdict, write the report."""
-    from identification.diagnosis import diagnose
-    from identification.diagnosis_report import write_report
-    from identification.effects import EFFECTS
+    from panto.identification.diagnosis.pipeline import diagnose
+    from panto.identification.diagnosis.report import write_report
+    from panto.identification.diagnosis.effects import EFFECTS
 
     train = load_data(args.train, args, _rows(args.train_samples))
     validation = load_data(args.validate, args, _rows(args.validate_samples))
@@ -195,8 +195,8 @@ def run_benchmark(args: argparse.Namespace) -> int:
     """Draw the cases, diagnose them blind in parallel, score, write JSON + markdown + PNG."""
     from concurrent.futures import ProcessPoolExecutor
 
-    from identification.diagnosis_benchmark import run_diagnosis_benchmark
-    from identification.diagnosis_benchmark_report import write_benchmark
+    from panto.identification.diagnosis.benchmark import run_diagnosis_benchmark
+    from panto.identification.diagnosis.benchmark_report import write_benchmark
 
     if args.cases < 1 or args.workers < 1 or args.duration <= 2.0:
         raise ValueError(f"--cases {args.cases}, --workers {args.workers}, --duration "

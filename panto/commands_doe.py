@@ -5,11 +5,11 @@
   optimal motor position and pressure demand for the structure's free parameters, written as a
   rig profile (JSON + CSV table, checked by the profile loader), the predicted covariance table
   (designed vs the APRBS training profile of equal length) and plots
-  (:mod:`identification.pantograph_design`, :mod:`identification.pantograph_profiles`).
+  (:mod:`panto.identification.design.pantograph`, :mod:`panto.identification.design.profiles`).
 * ``--discriminate EFFECT`` (``F_f1``: friction on the two-mass oscillator's lower mass;
   ``T_f``: hinge friction in the nonlinear pantograph FMU): the input that makes the effect
-  show (T-optimality, :mod:`identification.pantograph_discrimination`), exported the same way.
-* ``--thesis-example``: the thesis' section 5.4 example (:mod:`identification.doe_example`)
+  show (T-optimality, :mod:`panto.identification.design.discrimination`), exported the same way.
+* ``--thesis-example``: the thesis' section 5.4 example (:mod:`panto.identification.design.thesis_example`)
   with its plots.
 """
 from __future__ import annotations
@@ -72,7 +72,7 @@ def read_parameters(path: str | Path) -> dict[str, float]:
 
 
 def _model(args: argparse.Namespace, constraints, n_samples: int):
-    from identification.pantograph_sensitivity import LinearisedPantograph
+    from panto.identification.design.pantograph_sensitivity import LinearisedPantograph
 
     structure = args.model
     if args.discriminate == "F_f1":
@@ -99,7 +99,7 @@ def run_doe(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     if args.thesis_example:
         return _thesis_example(out)
-    from identification.pantograph_design import DesignOptions, RigInputConstraints
+    from panto.identification.design.pantograph import DesignOptions, RigInputConstraints
 
     constraints = RigInputConstraints.from_rig(minimum_contact_force=args.minimum_contact_force)
     n_samples = int(round(args.duration / constraints.sample_period))
@@ -108,8 +108,8 @@ def run_doe(args: argparse.Namespace) -> int:
          f"{args.duration} s, rig limits {constraints}")
     if args.discriminate:
         return _discriminate(args, model, constraints, out)
-    from identification.pantograph_design import design_pantograph_experiment
-    from identification.pantograph_profiles import write_design_report
+    from panto.identification.design.pantograph import design_pantograph_experiment
+    from panto.identification.design.profiles import write_design_report
 
     options = DesignOptions(population=args.population or 40,
                             generations=args.generations or 150, seed=args.seed)
@@ -124,9 +124,9 @@ def run_doe(args: argparse.Namespace) -> int:
 
 
 def _discriminate(args, model, constraints, out: Path) -> int:
-    from identification.pantograph_design import DesignOptions
-    from identification.pantograph_discrimination import EffectModel, design_discrimination
-    from identification.pantograph_profiles import write_design_profile
+    from panto.identification.design.pantograph import DesignOptions
+    from panto.identification.design.discrimination import EffectModel, design_discrimination
+    from panto.identification.design.profiles import write_design_profile
 
     options = DesignOptions(population=args.population or 12,
                             generations=args.generations or 15, seed=args.seed)
@@ -154,8 +154,8 @@ def _finish(args, summary: dict, paths: dict) -> int:
 
 
 def _thesis_example(out: Path) -> int:
-    from identification.doe_example import run_thesis_example
-    from identification.doe_plots import plot_line_designs, plot_thesis_example
+    from panto.identification.design.thesis_example import run_thesis_example
+    from panto.identification.design.plots import plot_line_designs, plot_thesis_example
 
     example = run_thesis_example(progress=_say)
     paths = [plot_line_designs(out / "doe_line.png"), *plot_thesis_example(example, out),

@@ -41,9 +41,9 @@ def _executor(workers: int):
 
 def run_identify(args: argparse.Namespace) -> int:
     """Load the runs, fit, print, write."""
-    from identification.base import identifier
-    from identification.data import pantograph_data
-    from identification.reporting import write_identification
+    from panto.identification.estimation.base import identifier
+    from panto.identification.data.datasets import pantograph_data
+    from panto.identification.estimation.reporting import write_identification
 
     def load(path: str):
         return pantograph_data(path, rate=args.rate, eta_offset=args.eta_offset, start=args.start,
@@ -82,7 +82,7 @@ def run_identify(args: argparse.Namespace) -> int:
         for path in paths.values():
             _say(f"wrote {path}")
     if args.json:
-        from identification.reporting import result_summary
+        from panto.identification.estimation.reporting import result_summary
 
         summary = result_summary(result, data=data, validation=validation)
         Path(args.json).write_text(json.dumps(summary, indent=2, default=str) + "\n")
@@ -92,7 +92,7 @@ def run_identify(args: argparse.Namespace) -> int:
 
 def _write_collector_head(data, folder: Path) -> None:
     """The head's PT2 fits (eqs. 4.15/4.16) as JSON and their Bode plot against the H1 estimate."""
-    from identification.collector_head import identify_collector_head, plot_collector_head
+    from panto.identification.structures.collector_head import identify_collector_head, plot_collector_head
 
     folder.mkdir(parents=True, exist_ok=True)
     head = identify_collector_head(data)
@@ -104,7 +104,7 @@ def _write_collector_head(data, folder: Path) -> None:
 
 def _nominal(model: str) -> dict[str, float] | None:
     if model in ("physical", "physical-linear"):
-        from identification.physical import PhysicalLinear
+        from panto.identification.structures.physical import PhysicalLinear
 
         return PhysicalLinear().nominal()
     return None

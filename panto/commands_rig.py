@@ -20,7 +20,7 @@ def _say(line: str) -> None:
 
 
 def _imperfections(text: str):
-    from rig.imperfections import RigImperfections
+    from panto.rig.imperfections import RigImperfections
 
     if text == "none":
         return RigImperfections.none()
@@ -38,16 +38,16 @@ def _imperfections(text: str):
 def _pantograph_fmu(args: argparse.Namespace) -> Path:
     if args.fmu:
         return Path(args.fmu)
-    from build_fmu.project import project_fmu
+    from panto.build_fmu.project import project_fmu
 
     return project_fmu("Pantograph", progress=_say)
 
 
 def run_rig_run(args: argparse.Namespace) -> int:
     """Play a profile and record the run."""
-    from rig.profiles import load_profile
-    from rig.recorder import new_run_folder
-    from rig.session import RunOptions
+    from panto.rig.profiles import load_profile
+    from panto.rig.recorder import new_run_folder
+    from panto.rig.session import RunOptions
 
     profile = load_profile(args.profile)
     if args.duration is not None:
@@ -63,14 +63,14 @@ def run_rig_run(args: argparse.Namespace) -> int:
     if args.interface:
         result = _run_on_rig(args, profile, folder, options)
     elif args.realtime:
-        from rig.realtime import run_virtual_profile_realtime
+        from panto.rig.realtime import run_virtual_profile_realtime
 
         result = run_virtual_profile_realtime(
             profile, fmu_path=_pantograph_fmu(args), folder=folder,
             imperfections=_imperfections(args.imperfections), seed=args.seed, options=options,
             progress=_say)
     else:
-        from rig.virtual import run_virtual_profile
+        from panto.rig.virtual import run_virtual_profile
 
         result = run_virtual_profile(
             profile, fmu_path=_pantograph_fmu(args), folder=folder,
@@ -82,14 +82,14 @@ def run_rig_run(args: argparse.Namespace) -> int:
 
 def _run_on_rig(args: argparse.Namespace, profile, folder: Path, options):
     """The real rig: the CAN interface by configuration, the analogue I/O from a user factory."""
-    from rig.clock import RealClock
-    from rig.drive import LinearMotorDriver
-    from rig.session import run_profile
+    from panto.rig.clock import RealClock
+    from panto.rig.drive import LinearMotorDriver
+    from panto.rig.session import run_profile
 
     if not args.io:
         raise ValueError("a real rig needs --io MODULE:FACTORY: a function returning the rig's "
                          "analogue I/O (an object with read_sensors(now), write_valve_voltage(v), "
-                         "write_led(bit); see rig.session.RigIO)")
+                         "write_led(bit); see panto.rig.session.RigIO)")
     module_name, _, factory_name = args.io.partition(":")
     try:
         factory = getattr(importlib.import_module(module_name), factory_name)
@@ -106,7 +106,7 @@ def _run_on_rig(args: argparse.Namespace, profile, folder: Path, options):
 
 def run_rig_emulate(args: argparse.Namespace) -> int:
     """Serve the emulated drive (with the plant behind it) on a CAN bus in real time."""
-    from rig.realtime import serve_emulator
+    from panto.rig.realtime import serve_emulator
 
     serve_emulator({"interface": args.interface, "channel": args.channel},
                    fmu_path=_pantograph_fmu(args), duration=args.duration, progress=_say)
@@ -115,7 +115,7 @@ def run_rig_emulate(args: argparse.Namespace) -> int:
 
 def run_rig_profile(args: argparse.Namespace) -> int:
     """Render a profile (demand, conditioned command, pressure, LED) to CSV and a plot."""
-    from rig.profile_preview import preview_profile
+    from panto.rig.profile_preview import preview_profile
 
     written = preview_profile(args.profile, out=Path(args.out))
     for path in written:
@@ -125,7 +125,7 @@ def run_rig_profile(args: argparse.Namespace) -> int:
 
 def run_rig_check(args: argparse.Namespace) -> int:
     """Check a dataset against the schema; print its channels and status."""
-    from rig.dataset import REQUIRED_CHANNELS, read_dataset
+    from panto.rig.dataset import REQUIRED_CHANNELS, read_dataset
 
     data = read_dataset(args.dataset, required=() if args.any_channels else REQUIRED_CHANNELS)
     _say(f"{args.dataset}: {len(data)} samples at {data.metadata.sample_rate:g} Hz, "

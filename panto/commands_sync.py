@@ -23,7 +23,7 @@ def _say(line: str) -> None:
 
 def run_sync(args: argparse.Namespace) -> int:
     """Synchronise and merge (module notes)."""
-    from video_sync.merge import sync_and_merge
+    from panto.video_sync.merge import sync_and_merge
 
     result = sync_and_merge(args.run_folder, args.track_csv, args.out,
                             interpolation=args.interpolation,
@@ -49,8 +49,8 @@ def run_sync(args: argparse.Namespace) -> int:
 
 def run_preprocess(args: argparse.Namespace) -> int:
     """Low-pass and resample a dataset."""
-    from identification.preprocessing import resample_dataset
-    from rig.dataset import read_dataset
+    from panto.identification.data.preprocessing import resample_dataset
+    from panto.rig.dataset import read_dataset
 
     dataset = read_dataset(args.dataset, required=())
     out = resample_dataset(dataset, args.rate, stopband=args.stopband, passband=args.passband,
@@ -67,8 +67,8 @@ def run_preprocess(args: argparse.Namespace) -> int:
 
 def run_aliasing_check(args: argparse.Namespace) -> int:
     """Compare two runs' spectra; exit 1 when aliasing is suspected."""
-    from identification.preprocessing import check_aliasing, plot_aliasing_check
-    from rig.dataset import read_dataset
+    from panto.identification.data.preprocessing import check_aliasing, plot_aliasing_check
+    from panto.rig.dataset import read_dataset
 
     check = check_aliasing(read_dataset(args.run_a, required=()),
                            read_dataset(args.run_b, required=()), args.channel,

@@ -37,7 +37,7 @@ def _named(items: list[str] | None, what: str) -> dict[str, str]:
 
 def run_video_render(args: argparse.Namespace) -> int:
     """Film a virtual run (its truth.csv) with the synthetic camera."""
-    from video_sync.camera import CameraSetup, render_run
+    from panto.video_sync.camera import CameraSetup, render_run
 
     setup = CameraSetup() if args.scale == 1.0 else CameraSetup().reduced(args.scale)
     result = render_run(args.run_folder, args.out, setup=setup, codec=args.codec, rng=args.seed,
@@ -63,7 +63,7 @@ def _scales(args: argparse.Namespace, names: list[str]):
 
 def run_video_setup(args: argparse.Namespace) -> int:
     """Write a tracker set-up from the camera's side file or from rough clicks."""
-    from video_sync.setup import make_setup, plot_detection_steps, setup_from_camera
+    from panto.video_sync.setup import make_setup, plot_detection_steps, setup_from_camera
 
     if args.camera:
         setup = setup_from_camera(args.camera)
@@ -89,7 +89,7 @@ def run_video_setup(args: argparse.Namespace) -> int:
 
 def run_video_track(args: argparse.Namespace) -> int:
     """Track the markers and read the LED; write the track file."""
-    from video_sync.tracking import TrackerSetup, track_video
+    from panto.video_sync.tracking import TrackerSetup, track_video
 
     result = track_video(args.video, TrackerSetup.load(args.setup), progress=_say)
     result.to_csv(args.out)

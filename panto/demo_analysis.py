@@ -21,14 +21,14 @@ TARGET_STATIC_FORCE = 120.0
 def identify_models(state: dict[str, Any], progress: Progress) -> dict:
     """Step 3: the comparison table, the physical model's parameter file, Pareto front and
     eigenvalue sensitivity."""
-    from identification.comparison import (
+    from panto.identification.estimation.comparison import (
         compare_structures,
         plot_comparison,
         plot_validation,
     )
-    from identification.data import pantograph_data
-    from identification.physical import PhysicalLinear
-    from identification.reporting import write_identification
+    from panto.identification.data.datasets import pantograph_data
+    from panto.identification.structures.physical import PhysicalLinear
+    from panto.identification.estimation.reporting import write_identification
 
     out, settings = state["out"], state["settings"]
     train = pantograph_data(state["runs"]["training"], rate=50.0)
@@ -74,7 +74,7 @@ def identify_models(state: dict[str, Any], progress: Progress) -> dict:
 
 
 def _fits(data: Any, simulated: np.ndarray) -> dict[str, float]:
-    from identification.base import fit_percent
+    from panto.identification.estimation.base import fit_percent
 
     values = np.atleast_1d(fit_percent(data.outputs, simulated))
     return {name: float(v) for name, v in zip(data.output_names, values)}
@@ -82,7 +82,7 @@ def _fits(data: Any, simulated: np.ndarray) -> dict[str, float]:
 
 def _pareto(structure: Any, train: Any, out: Any, settings: Any, progress: Progress) -> dict:
     """NSGA-II front of the two fits (thesis Fig. 4.7), its knee polished by LM."""
-    from identification.genetic import fit_pareto, plot_pareto
+    from panto.identification.estimation.genetic import fit_pareto, plot_pareto
 
     if settings.pareto_population <= 0:
         return {"skipped": "population 0"}
@@ -107,7 +107,7 @@ def _text(fits: dict) -> str:
 
 def _sensitivity(result: Any, out: Any, progress: Progress) -> dict:
     """Eigenvalues of the identified model with each Table 4.1 parameter scaled (Fig. 4.9)."""
-    from identification.sensitivity import (
+    from panto.identification.structures.sensitivity import (
         eigenvalue_sensitivity,
         plot_eigenvalue_sensitivity,
     )
@@ -124,8 +124,8 @@ def _sensitivity(result: Any, out: Any, progress: Progress) -> dict:
 def diagnose_gap(state: dict[str, Any], progress: Progress) -> dict:
     """Step 4: where the physical model misses on the withheld run, and how far the found
     effects close the gap."""
-    from identification.diagnosis import diagnose
-    from identification.diagnosis_report import write_report
+    from panto.identification.diagnosis.pipeline import diagnose
+    from panto.identification.diagnosis.report import write_report
 
     out, settings = state["out"], state["settings"]
     train, validation = state["data"]
@@ -167,7 +167,7 @@ def rig_truth(truth: Any, named: Any) -> list[dict]:
     diagnosis never reads) beside what the diagnosis `named`: one row per imperfection that was
     on, with the library effect that stands for it (None: no library effect does; it is absorbed
     by the nominal's parameters or left in the gap). Empty without a truth record (a real rig)."""
-    from identification.diagnosis_benchmark import IMPERFECTIONS_OF
+    from panto.identification.diagnosis.benchmark import IMPERFECTIONS_OF
 
     hidden = (truth or {}).get("imperfections") or {}
     effect_of = {name: effect for effect, names in IMPERFECTIONS_OF.items() for name in names}
@@ -189,13 +189,13 @@ def _finite(value: float) -> float | None:
 def design_next_run(state: dict[str, Any], progress: Progress) -> dict:
     """Step 5: the D-optimal rig run for the physical model's parameters (thesis 5.5), as a
     rig profile, with the predicted covariance against the APRBS of equal length."""
-    from identification.pantograph_design import (
+    from panto.identification.design.pantograph import (
         DesignOptions,
         RigInputConstraints,
         design_pantograph_experiment,
     )
-    from identification.pantograph_profiles import write_design_report
-    from identification.pantograph_sensitivity import LinearisedPantograph
+    from panto.identification.design.profiles import write_design_report
+    from panto.identification.design.pantograph_sensitivity import LinearisedPantograph
 
     out, settings = state["out"], state["settings"]
     constraints = RigInputConstraints.from_rig()
@@ -228,9 +228,9 @@ def design_next_run(state: dict[str, Any], progress: Progress) -> dict:
 
 def cosimulate_identified(state: dict[str, Any], progress: Progress) -> dict:
     """Step 6: the identified pantograph on the EN 50318 line; statistics against the targets."""
-    from catenary_cosim.master import cosimulate
-    from catenary_cosim.pantographs import pantograph_setup
-    from catenary_cosim.validation import ACCEPTANCE, LABELS
+    from panto.catenary_cosim.master import cosimulate
+    from panto.catenary_cosim.pantographs import pantograph_setup
+    from panto.catenary_cosim.validation import ACCEPTANCE, LABELS
 
     out, settings = state["out"], state["settings"]
     parameters = _pantograph_parameters(state.get("identified"))
@@ -276,7 +276,7 @@ def cosimulate_identified(state: dict[str, Any], progress: Progress) -> dict:
 
 def _pantograph_parameters(identified: dict | None) -> dict[str, float]:
     """The identified values the Pantograph FMU has as parameters (checked by its specs)."""
-    from fmu_src.models import default_parameters
+    from panto.fmu_src.models import default_parameters
 
     defaults = default_parameters("Pantograph")
     values = {k: float(v) for k, v in (identified or {}).items() if k in defaults.names}
@@ -289,14 +289,14 @@ def pressure_for_static_force(parameters: dict[str, float], force: float, *,
     """Bellow pressure [bar] at which the pantograph presses with `force` [N] at height `eta`.
 
     Solves :math:`F_c(\\eta, p) = F` for p with the static equilibrium of the physical model
-    (:func:`identification.linearisation.linearise` gives the equilibrium outputs
+    (:func:`panto.identification.structures.linearisation.linearise` gives the equilibrium outputs
     :math:`y_0 = (y_{cb}, \\xi, F_c)`; compiled once per process, unlike a new
-    :class:`fmu_src.models.Model`); the force grows monotonically with the pressure.
+    :class:`panto.fmu_src.models.Model`); the force grows monotonically with the pressure.
     """
     from scipy.optimize import brentq
 
-    from identification.linearisation import linearise
-    from identification.physical import PhysicalLinear
+    from panto.identification.structures.linearisation import linearise
+    from panto.identification.structures.physical import PhysicalLinear
 
     structure = PhysicalLinear()
     vector = structure.parameter_vector({k: v for k, v in parameters.items()

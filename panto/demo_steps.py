@@ -28,7 +28,7 @@ def fit_percent(measured: np.ndarray, simulated: np.ndarray) -> float:
 
 def build_fmus(state: dict[str, Any], progress: Progress) -> dict:
     """Step 1: generate, compile, package and validate the FMUs into ``out/fmus``."""
-    from build_fmu.project import build_project_fmus
+    from panto.build_fmu.project import build_project_fmus
 
     out, settings = state["out"], state["settings"]
     kwargs = {"names": settings.fmu_names} if settings.fmu_names else {}
@@ -48,9 +48,9 @@ def run_rig_campaign(state: dict[str, Any], progress: Progress) -> dict:
     from dataclasses import replace
     from importlib.resources import files
 
-    from rig.profiles import load_profile
-    from rig.recorder import new_run_folder
-    from rig.virtual import run_virtual_profile
+    from panto.rig.profiles import load_profile
+    from panto.rig.recorder import new_run_folder
+    from panto.rig.virtual import run_virtual_profile
 
     out, settings = state["out"], state["settings"]
     runs = {}
@@ -78,8 +78,8 @@ def run_rig_campaign(state: dict[str, Any], progress: Progress) -> dict:
 
 def _nominal_against_measured(out: Path, label: str, folder: Path, progress: Progress) -> dict:
     """Simulate the nominal nonlinear and linearised FMUs on a run's measured inputs."""
-    from build_fmu.simulate import FmuSimulator
-    from rig.dataset import read_dataset
+    from panto.build_fmu.simulate import FmuSimulator
+    from panto.rig.dataset import read_dataset
 
     data = read_dataset(folder)
     zero = float(data.metadata.extra.get("rig_setup", {}).get("motor_zero_height", 2.0))
@@ -147,10 +147,10 @@ def film_runs(state: dict[str, Any], progress: Progress) -> dict:
 
 def _film_one(label: str, folder: Path, video_dir: Path, settings: Any,
               progress: Progress) -> dict:
-    from video_sync.camera import CameraSetup, render_run
-    from video_sync.merge import sync_and_merge
-    from video_sync.setup import setup_from_camera
-    from video_sync.tracking import track_video
+    from panto.video_sync.camera import CameraSetup, render_run
+    from panto.video_sync.merge import sync_and_merge
+    from panto.video_sync.setup import setup_from_camera
+    from panto.video_sync.tracking import track_video
 
     video_dir.mkdir(parents=True, exist_ok=True)
     camera = CameraSetup().reduced(settings.video_scale) if settings.video_scale != 1 \

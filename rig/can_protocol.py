@@ -7,7 +7,7 @@ synchronisation frame. The drive (LinMot type, CANopen CiA 301 with the vendor's
 a received RxPDO at the next SYNC and answers every SYNC with TxPDO1..3.
 
 The frame layout lives in ``linear_motor.dbc`` next to this module, read once with cantools, so the
-driver (:mod:`rig.drive`), the emulator (:mod:`rig.drive_emulator`) and a user's bus analyser all
+driver (:mod:`panto.rig.drive`), the emulator (:mod:`panto.rig.drive_emulator`) and a user's bus analyser all
 share one definition. The DBC file carries the identifiers of the default node 63; for another node
 ``n`` :class:`FrameIds` shifts the PDO identifiers (``0x180/0x280/0x380 + n``, ``0x200 + n``), and
 :func:`encode_frame` / :func:`decode_frame` take the node id.

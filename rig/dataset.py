@@ -25,7 +25,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from fmu_src.response import format_header, metadata_path_for, parse_header
+from panto.fmu_src.response import format_header, metadata_path_for, parse_header
 
 FORMAT = "panto-rig-dataset"
 VERSION = 1
@@ -224,8 +224,8 @@ class Dataset:
         return int(self.time.size)
 
     def to_time_response(self):
-        """As a :class:`fmu_src.response.TimeResponse` (metadata as a plain dictionary)."""
-        from fmu_src.response import TimeResponse
+        """As a :class:`panto.fmu_src.response.TimeResponse` (metadata as a plain dictionary)."""
+        from panto.fmu_src.response import TimeResponse
 
         return TimeResponse(self.time, dict(self.channels), units=dict(self.units),
                             metadata=self.metadata.to_dict())

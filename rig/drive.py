@@ -8,7 +8,7 @@ every second frame being a SYNC (Kalteis, section 3.1). :class:`LinearMotorDrive
   machine (2 -> 6 -> 8), checking the reply after every stage.
 * :meth:`~LinearMotorDriver.stream`: one cycle: RxPDO1 with the position-stream command 030x and
   the next command-count nibble, then SYNC. The caller keeps the period (absolute deadlines, see
-  :class:`rig.clock.Ticker`).
+  :class:`panto.rig.clock.Ticker`).
 * :meth:`~LinearMotorDriver.check`: reads the replies without blocking and raises
   :class:`DriveFault` with the drive's error code and its meaning when the drive reports an error,
   when replies are missing for ``reply_timeout_cycles`` SYNCs, or when the bus fails
@@ -49,7 +49,7 @@ from typing import Any, NoReturn
 
 import can
 
-from rig.can_protocol import (
+from panto.rig.can_protocol import (
     CONTROL_WORD_OFF,
     CONTROL_WORD_READY,
     CONTROL_WORD_RUNNING,
@@ -72,7 +72,7 @@ from rig.can_protocol import (
     setpoint_frame,
     sync_frame,
 )
-from rig.clock import Clock, RealClock
+from panto.rig.clock import Clock, RealClock
 
 
 @dataclass(frozen=True)
@@ -83,7 +83,7 @@ class DriveFeedback:
     ----------
     time : clock time at which the TxPDO1 was read [s].
     status_word : decoded status bits.
-    main_state : main state (:class:`rig.can_protocol.MainState` values).
+    main_state : main state (:class:`panto.rig.can_protocol.MainState` values).
     command_count_echo : count nibble of the last executed motion command (state 8), else None.
     actual_position : slider position [m].
     demand_position : interpolated demand position [m].
@@ -133,7 +133,7 @@ class DriveFault(RigError):
 
     Attributes
     ----------
-    code : error code (:class:`rig.can_protocol.ErrorCode`; > 0xFFFF: detected by the driver).
+    code : error code (:class:`panto.rig.can_protocol.ErrorCode`; > 0xFFFF: detected by the driver).
     meaning : what the code means, with details.
     feedback : the drive's last replies (None if there were none).
     """
@@ -191,7 +191,7 @@ class LinearMotorDriver:
         The drive's CANopen node id.
     clock
         Time source for the waits of :meth:`start`/:meth:`disable` and for feedback time stamps;
-        default :class:`rig.clock.RealClock`.
+        default :class:`panto.rig.clock.RealClock`.
     period
         Cycle period used by :meth:`start`/:meth:`disable` [s] (the stream's period is the
         caller's: the drive measures it).

@@ -2,7 +2,7 @@
 
 The emulator reads the master's frames (NMT, RxPDO1, SYNC; layout in ``linear_motor.dbc``) and
 answers every SYNC with TxPDO1..3, like the LinMot-type drive of the thesis' rig (Kalteis,
-section 3.1; protocol facts in :mod:`rig.can_protocol`):
+section 3.1; protocol facts in :mod:`panto.rig.can_protocol`):
 
 * NMT: PDOs are handled only after "start remote node".
 * Control-word state machine: 2 ready to switch on -> 6 ready to operate -> 8 operation enabled
@@ -53,7 +53,7 @@ is left while the slider moves, it first decelerates at ``quick_stop_deceleratio
 
 Running it: :meth:`DriveEmulator.process_pending` handles all frames waiting on the bus at the
 clock's current time and advances the slider to that time (tests and the lock-step virtual test bed
-call it once per cycle, or register it with :meth:`rig.clock.SimulatedClock.add_hook`);
+call it once per cycle, or register it with :meth:`panto.rig.clock.SimulatedClock.add_hook`);
 :meth:`DriveEmulator.serve` does the same in a real-time thread. The slider is advanced in internal
 steps; ``listener(time, position, velocity)`` is called every ``listener_period`` (2 ms, so a plant
 can be stepped at 500 Hz) and ``load_force()`` is read every internal step.
@@ -69,7 +69,7 @@ from dataclasses import dataclass
 
 import can
 
-from rig.can_protocol import (
+from panto.rig.can_protocol import (
     DEFAULT_NODE_ID,
     STREAM_MASTER_ID,
     ControlWord,
@@ -84,7 +84,7 @@ from rig.can_protocol import (
     encode_frame,
     load_database,
 )
-from rig.clock import Clock
+from panto.rig.clock import Clock
 
 Listener = Callable[[float, float, float], object]
 _OPERATION, _ERROR, _QUICK_STOP = (MainState.OPERATION_ENABLED, MainState.ERROR,
@@ -258,7 +258,7 @@ class DriveEmulator:
     bus
         The emulator's own bus object (on the master's channel).
     clock
-        Time source; a :class:`rig.clock.SimulatedClock` for lock-step runs.
+        Time source; a :class:`panto.rig.clock.SimulatedClock` for lock-step runs.
     node_id
         CANopen node id (default 63).
     parameters
@@ -345,7 +345,7 @@ class DriveEmulator:
 
     @property
     def main_state(self) -> int:
-        """Main state (:class:`rig.can_protocol.MainState` values)."""
+        """Main state (:class:`panto.rig.can_protocol.MainState` values)."""
         return self._state
 
     @property

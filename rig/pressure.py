@@ -15,7 +15,7 @@ and the integrator :math:`I` is updated with one of
   :math:`T_t` (Astrom & Hagglund, *Advanced PID Control*, ISA 2006, sec. 3.5);
 - ``"none"``: plain integration, which winds up during saturation (for comparison only).
 
-Gains are project defaults (the thesis gives none), tuned against :mod:`rig.pneumatics`:
+Gains are project defaults (the thesis gives none), tuned against :mod:`panto.rig.pneumatics`:
 the integral time :math:`K_p/K_i` equals the bellow's time constant (0.4 s), the loop crossover is
 a few rad/s, well below the phase loss of the 20 ms valve delay.
 """

@@ -5,8 +5,8 @@ from pathlib import Path
 
 import numpy as np
 
-from rig.conditioning import MotorConditioner
-from rig.profiles import Profile, load_profile, render_profile
+from panto.rig.conditioning import MotorConditioner
+from panto.rig.profiles import Profile, load_profile, render_profile
 
 
 def conditioned_command(profile: Profile) -> tuple[np.ndarray, np.ndarray]:

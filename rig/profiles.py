@@ -2,9 +2,9 @@
 
 A profile holds both inputs of the rig (thesis section 3.1): the linear-motor position demand [m]
 and the bellow pressure demand [bar], each an offset plus a list of signals
-(:mod:`rig.signals`) that are summed; the sample rate (500 Hz, the thesis' real-time unit), the
+(:mod:`panto.rig.signals`) that are summed; the sample rate (500 Hz, the thesis' real-time unit), the
 duration, the safety limits, the conditioning options of the motor command
-(:mod:`rig.conditioning`), the LED sequence (:mod:`rig.sync_led`), a seed and notes::
+(:mod:`panto.rig.conditioning`), the LED sequence (:mod:`panto.rig.sync_led`), a seed and notes::
 
     {"format": "panto-rig-profile", "version": 1, "name": "aprbs", "duration": 120,
      "sample_rate": 500, "seed": 7,
@@ -32,9 +32,9 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from rig.conditioning import ConditioningOptions, MotorLimits
-from rig.signals import RealiseContext, Signal, parse_field, signal_from_dict
-from rig.sync_led import LedOptions, generate_led_bits
+from panto.rig.conditioning import ConditioningOptions, MotorLimits
+from panto.rig.signals import RealiseContext, Signal, parse_field, signal_from_dict
+from panto.rig.sync_led import LedOptions, generate_led_bits
 
 FORMAT = "panto-rig-profile"
 VERSION = 1
@@ -83,7 +83,7 @@ class SafetyLimits:
                              f"[{self.pressure_min}, {self.pressure_max}] bar")
 
     def motor_limits(self) -> MotorLimits:
-        """The limits in the form :class:`rig.conditioning.MotorConditioner` takes."""
+        """The limits in the form :class:`panto.rig.conditioning.MotorConditioner` takes."""
         return MotorLimits(position_min=self.motor_min, position_max=self.motor_max,
                            max_step=self.motor_max_step)
 
@@ -343,7 +343,7 @@ class ProfileStream:
     """
 
     def __init__(self, profile: Profile, *, chunk: int = 500) -> None:
-        from rig.sync_led import LedStream
+        from panto.rig.sync_led import LedStream
 
         self.profile = profile
         self._realised = _realise(profile)

@@ -1,12 +1,12 @@
 """The virtual test bed against the wall clock: the emulated rig served in real time.
 
-:func:`rig.virtual.run_virtual_profile` runs in lock step on a simulated clock: exact and
+:func:`panto.rig.virtual.run_virtual_profile` runs in lock step on a simulated clock: exact and
 reproducible, but it never meets a deadline. Here the same pieces run as on the rig:
 
-* :func:`run_virtual_profile_realtime`: the unchanged run loop of :mod:`rig.session` keeps its
-  2 ms deadlines on :class:`rig.clock.RealClock`, while :meth:`DriveEmulator.serve
-  <rig.drive_emulator.DriveEmulator.serve>` answers its CAN frames from a background thread and
-  steps the plant (:class:`rig.testbed.VirtualTestBed`) every 2 ms of drive time. A run takes as
+* :func:`run_virtual_profile_realtime`: the unchanged run loop of :mod:`panto.rig.session` keeps its
+  2 ms deadlines on :class:`panto.rig.clock.RealClock`, while :meth:`DriveEmulator.serve
+  <panto.rig.drive_emulator.DriveEmulator.serve>` answers its CAN frames from a background thread and
+  steps the plant (:class:`panto.rig.testbed.VirtualTestBed`) every 2 ms of drive time. A run takes as
   long as its duration, and what it records depends on how well this computer keeps time.
 * :func:`serve_emulator` (``panto rig emulate``): the drive emulator and the plant on any
   python-can bus, in real time, until stopped, for a master in another process or on another
@@ -15,7 +15,7 @@ reproducible, but it never meets a deadline. Here the same pieces run as on the 
 Threads and the plant
     The emulator thread steps the plant; the run loop reads the plant's sensors from the main
     thread. :class:`SharedPlant` makes that safe without a lock the loop could wait on: each plant
-    step builds a new, never-mutated :class:`rig.testbed.PlantSample`, and publishing it is one
+    step builds a new, never-mutated :class:`panto.rig.testbed.PlantSample`, and publishing it is one
     reference store (atomic in CPython), so the loop always reads a complete sample, the newest
     one, and never waits for an FMU step in progress. The loop's writes (valve voltage, LED) are
     single float/int stores that the next plant step picks up.
@@ -35,7 +35,7 @@ Why the drive timing is lenient here (:data:`REALTIME_DRIVE_SETTINGS`)
     * a time base that follows the master (correction g = 0.3). The drive measures its period
       from the first two commands; when the first command is late, that interval is too short
       and a time base that keeps it (g = 0, or g = 0.1 as first proposed) runs out of setpoints
-      within a few periods. An offline replay of :class:`rig.drive_emulator.SetpointStream`
+      within a few periods. An offline replay of :class:`panto.rig.drive_emulator.SetpointStream`
       (3 periods of delay, first two commands 0-3.2 ms late) failed 15 of 60 starts with
       g = 0.1 and 6 of 60 with g = 0.3; stalls later in the run were tolerated up to the delay
       margin whatever g. The price: a setpoint's schedule moves by g times its arrival jitter.
@@ -66,15 +66,15 @@ from typing import Any
 
 import can
 
-from rig.clock import Clock, RealClock
-from rig.can_protocol import DEFAULT_NODE_ID
-from rig.drive import LinearMotorDriver, open_bus
-from rig.drive_emulator import DriveEmulator, DriveParameters
-from rig.imperfections import RigImperfections
-from rig.profiles import Profile, ProfileStream
-from rig.virtual import POSITION_LATENCY, TRUTH_FILE, plain_drive_parameters
-from rig.session import RunOptions, RunResult, run_profile
-from rig.testbed import PlantSample, VirtualTestBed
+from panto.rig.clock import Clock, RealClock
+from panto.rig.can_protocol import DEFAULT_NODE_ID
+from panto.rig.drive import LinearMotorDriver, open_bus
+from panto.rig.drive_emulator import DriveEmulator, DriveParameters
+from panto.rig.imperfections import RigImperfections
+from panto.rig.profiles import Profile, ProfileStream
+from panto.rig.virtual import POSITION_LATENCY, TRUTH_FILE, plain_drive_parameters
+from panto.rig.session import RunOptions, RunResult, run_profile
+from panto.rig.testbed import PlantSample, VirtualTestBed
 
 #: Drive timing for a real-time emulation on a non-real-time machine (see the module notes).
 REALTIME_DRIVE_SETTINGS: Mapping[str, Any] = MappingProxyType({
@@ -90,7 +90,7 @@ class RealtimeOptions:
     ----------
     lenient_timing : bool
         Start from :data:`REALTIME_DRIVE_SETTINGS` (True) or from the faithful drive timing of
-        :class:`rig.drive_emulator.DriveParameters` (False); ``drive`` overrides go on top.
+        :class:`panto.rig.drive_emulator.DriveParameters` (False); ``drive`` overrides go on top.
     reply_timeout_cycles : int
         SYNC periods without a drive reply before the driver reports "missing replies"
         (the rig's driver uses 3; the emulator thread may wake late, so more here).
@@ -296,7 +296,7 @@ def run_virtual_profile_realtime(profile: Profile, *, fmu_path: str | Path, fold
                                  progress: Callable[[str], None] | None = None) -> RunResult:
     """Run `profile` on the virtual test bed in real time and record it into `folder`.
 
-    As :func:`rig.virtual.run_virtual_profile`, but against the wall clock: the run loop keeps
+    As :func:`panto.rig.virtual.run_virtual_profile`, but against the wall clock: the run loop keeps
     its 500 Hz deadlines on `clock` and the drive emulator answers from a background thread
     (see the module notes for the threads and for the lenient drive timing).
 
@@ -314,13 +314,13 @@ def run_virtual_profile_realtime(profile: Profile, *, fmu_path: str | Path, fold
     seed : int
         Seed of the sensor noise.
     drive : mapping, optional
-        Overrides of :class:`rig.drive_emulator.DriveParameters`, applied on top of
+        Overrides of :class:`panto.rig.drive_emulator.DriveParameters`, applied on top of
         :data:`REALTIME_DRIVE_SETTINGS` (or of the faithful defaults, see `realtime`).
     options : RunOptions, optional
         Run options; the source is set to ``"emulator"`` and the truth is filled in.
     realtime : RealtimeOptions, optional
     clock : Clock, optional
-        The run loop's clock; default :class:`rig.clock.RealClock`. It must read
+        The run loop's clock; default :class:`panto.rig.clock.RealClock`. It must read
         ``time.monotonic`` (the driver and the emulator use a plain RealClock); a benchmark may
         pass a wrapper that records every wake-up.
     progress : callable, optional
@@ -392,7 +392,7 @@ def _warm_up(profile: Profile) -> None:
 
 
 def _write_truth(bed: VirtualTestBed, folder: str | Path, result: RunResult | None) -> None:
-    """``truth.csv`` beside the run (as :func:`rig.virtual.run_virtual_profile` writes it)."""
+    """``truth.csv`` beside the run (as :func:`panto.rig.virtual.run_virtual_profile` writes it)."""
 
     path = Path(folder) / TRUTH_FILE
     origin = result.clock_origin if result is not None else math.nan
@@ -456,7 +456,7 @@ def serve_emulator(bus_or_config: can.BusABC | Mapping[str, Any], *, fmu_path: s
     Parameters
     ----------
     bus_or_config : can.BusABC or mapping
-        A python-can bus (left open), or keyword arguments of :func:`rig.drive.open_bus`, e.g.
+        A python-can bus (left open), or keyword arguments of :func:`panto.rig.drive.open_bus`, e.g.
         ``{"interface": "socketcan", "channel": "vcan0"}`` (opened and shut down here).
     fmu_path : str or pathlib.Path
         The pantograph FMU used as the plant.

@@ -3,11 +3,11 @@
 A run lives in its own folder::
 
     run_0007/run.csv        time [s], channels with units in the header, one row per sample
-    run_0007/run.csv.json   units and metadata (:class:`rig.dataset.RunMetadata`), with status
+    run_0007/run.csv.json   units and metadata (:class:`panto.rig.dataset.RunMetadata`), with status
 
 Rows are kept in a buffer of `buffer_rows` (500 = 1 s at 500 Hz) and appended to the CSV when it
 is full, followed by ``flush`` and ``os.fsync``; so a crash of the process or of the machine loses
-at most the last buffer (and at worst leaves a torn last line, which :func:`rig.dataset.read_csv`
+at most the last buffer (and at worst leaves a torn last line, which :func:`panto.rig.dataset.read_csv`
 drops and reports). Writing and ``fsync`` of a buffer take a few milliseconds; in a 2 ms
 real-time loop pass ``background=True``: full buffers then go to a writer thread (the loop only
 formats rows, about 20 µs each), and a crash loses at most the buffer being written plus the one
@@ -31,7 +31,7 @@ from types import TracebackType
 
 import numpy as np
 
-from rig.dataset import (REQUIRED_CHANNELS, STANDARD_CHANNELS, DatasetError, RunMetadata,
+from panto.rig.dataset import (REQUIRED_CHANNELS, STANDARD_CHANNELS, DatasetError, RunMetadata,
                          check_dataset, csv_header, format_csv_row, read_csv, write_sidecar)
 
 RUN_FILE = "run.csv"
@@ -70,7 +70,7 @@ class Recorder:
         The run's metadata; its status is set to ``"running"`` until :meth:`finish`.
     units : mapping, optional
         Units of non-standard channels (standard ones have theirs, see
-        :data:`rig.dataset.STANDARD_CHANNELS`).
+        :data:`panto.rig.dataset.STANDARD_CHANNELS`).
     buffer_rows : int
         Rows per flush (500 = 1 s at 500 Hz).
     required : sequence of str
@@ -81,7 +81,7 @@ class Recorder:
     Examples
     --------
     >>> import tempfile, pathlib
-    >>> from rig.dataset import RunMetadata, read_dataset
+    >>> from panto.rig.dataset import RunMetadata, read_dataset
     >>> folder = pathlib.Path(tempfile.mkdtemp()) / "run_0001"
     >>> with Recorder(folder, channels=["force"], required=(),
     ...               metadata=RunMetadata(sample_rate=500.0, source="emulator")) as rec:

@@ -4,7 +4,7 @@ Per 2 ms sample (thesis section 3.1, the real-time unit's job): read the analogu
 pressure, lasers), step the PI pressure controller and write the valve voltage, write the LED bit;
 every second sample (250 Hz) condition the motor demand (Fig. 3.5/3.6), stream it to the drive
 and read the drive's replies; record one row. The loop keeps absolute deadlines
-(:class:`rig.clock.Ticker`), so a late cycle does not shift the run.
+(:class:`panto.rig.clock.Ticker`), so a late cycle does not shift the run.
 
 At the end of the profile the stream stops and the drive is switched off. A fault (drive error,
 missing replies, bus error) ends the excitation safely: the motor stream
@@ -21,13 +21,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Mapping, Protocol
 
-from rig.clock import Clock, SimulatedClock, Ticker
-from rig.conditioning import MotorConditioner
-from rig.dataset import RunMetadata
-from rig.drive import DriveFault, LinearMotorDriver, RigError
-from rig.pressure import PressureController, PressureControllerOptions
-from rig.profiles import Profile, ProfileStream, profile_to_dict
-from rig.recorder import Recorder
+from panto.rig.clock import Clock, SimulatedClock, Ticker
+from panto.rig.conditioning import MotorConditioner
+from panto.rig.dataset import RunMetadata
+from panto.rig.drive import DriveFault, LinearMotorDriver, RigError
+from panto.rig.pressure import PressureController, PressureControllerOptions
+from panto.rig.profiles import Profile, ProfileStream, profile_to_dict
+from panto.rig.recorder import Recorder
 
 #: Channels of a rig run, in column order.
 RUN_CHANNELS = ("motor_demand", "motor_command", "motor_position", "motor_current", "force",
@@ -197,7 +197,7 @@ class _Loop:
 
 def _holding_voltage(sensors: Mapping[str, float]) -> float:
     """Start the PI loop with the voltage that holds the present pressure (bumpless start)."""
-    from rig.pneumatics import ValveParameters
+    from panto.rig.pneumatics import ValveParameters
 
     return float(ValveParameters().voltage_for(sensors["pressure"]))
 
@@ -210,13 +210,13 @@ def run_profile(profile: Profile, *, driver: LinearMotorDriver, io: RigIO, clock
     Parameters
     ----------
     profile : Profile
-        Both channels, sample rate, duration, limits (see :mod:`rig.profiles`).
+        Both channels, sample rate, duration, limits (see :mod:`panto.rig.profiles`).
     driver : LinearMotorDriver
         The linear motor on its bus (not yet started).
     io : RigIO
         Analogue inputs, valve output and LED.
     clock : Clock
-        :class:`rig.clock.RealClock` on the rig; a :class:`rig.clock.SimulatedClock` whose hooks
+        :class:`panto.rig.clock.RealClock` on the rig; a :class:`panto.rig.clock.SimulatedClock` whose hooks
         step the emulator for a lock-step virtual run.
     folder : str or pathlib.Path
         Run folder (must not hold a run: a recorder never overwrites).

@@ -431,7 +431,7 @@ class Replay(Signal):
     """Replay of a recorded or computed sequence from a CSV file, e.g. the catenary sequence.
 
     The file's first column is ``time [s]``, a further column named `column` holds the values
-    (header ``name [unit]`` as written by :meth:`fmu_src.response.TimeResponse.to_csv`, e.g.
+    (header ``name [unit]`` as written by :meth:`panto.fmu_src.response.TimeResponse.to_csv`, e.g.
     ``contact_wire_displacement [m]`` from the catenary co-simulation; thesis Fig. 3.4 shows its
     periodic 0.72 s sequence at 300 km/h). The unit comes from the header, from a JSON file beside
     the CSV (``<file>.csv.json`` or ``<file>.json`` with ``{"units": {column: unit}}``) or from
@@ -471,7 +471,7 @@ class Replay(Signal):
 
     def read(self, context: RealiseContext) -> tuple[np.ndarray, np.ndarray, float | None]:
         """Times [s], values in the channel unit and the period [s] (None if not periodic)."""
-        from fmu_src.response import TimeResponse
+        from panto.fmu_src.response import TimeResponse
 
         path = self.resolve(context.base_dir)
         if not path.is_file():

@@ -5,7 +5,7 @@ What is simulated, per 2 ms sample (thesis chapter 3, Fig. 3.1):
 - the linear motor's slider position ``s`` comes from the drive emulator (up positive, zero at
   the bar height `motor_zero_height`); the stator rides on a robot mode ``z`` (mass-spring-damper
   driven by the reaction of the slider and the bar), so the bar is at ``eta = h0 + s + z``;
-- the valve voltage from the pressure controller drives :class:`rig.pneumatics.ValvePlant`
+- the valve voltage from the pressure controller drives :class:`panto.rig.pneumatics.ValvePlant`
   (what the pressure sensor measures); the bellow sees that pressure through a further transport
   delay and first-order lag;
 - the pantograph FMU (Co-Simulation, one step per sample, inputs ``eta`` and ``p``) gives the
@@ -26,9 +26,9 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from build_fmu.stepping import FmuStepper
-from rig.imperfections import RigImperfections
-from rig.pneumatics import ValveParameters, ValvePlant
+from panto.build_fmu.stepping import FmuStepper
+from panto.rig.imperfections import RigImperfections
+from panto.rig.pneumatics import ValveParameters, ValvePlant
 
 #: Sensor channels of a sample, with units.
 SENSOR_UNITS = {"force": "N", "pressure": "bar", "laser_1": "m", "laser_2": "m"}
@@ -217,7 +217,7 @@ class VirtualTestBed:
             self._truth_log.append((sample.time, *(sample.truth[n] for n in TRUTH_UNITS)))
 
     def truth_dataset(self, origin: float = 0.0):
-        """Every sample's hidden quantities as a :class:`rig.dataset.Dataset` (source emulator).
+        """Every sample's hidden quantities as a :class:`panto.rig.dataset.Dataset` (source emulator).
 
         Times are shifted by `origin` (the clock time of a run's t = 0), so they share the run's
         time base; samples before the run (the drive's start-up) have negative times.
@@ -225,7 +225,7 @@ class VirtualTestBed:
         The camera's view (markers on pan-head, cross bar and slider; the LED) and the tests of
         the diagnosis read it; the diagnosis itself never does.
         """
-        from rig.dataset import Dataset, RunMetadata
+        from panto.rig.dataset import Dataset, RunMetadata
 
         log = np.array(self._truth_log, dtype=float)
         log = log[np.concatenate([[True], np.diff(log[:, 0]) > 0])]  # one row per instant
@@ -236,7 +236,7 @@ class VirtualTestBed:
                                    truth=self.truth_record()))
 
     def read_sensors(self, now: float) -> dict[str, float]:
-        """The sensor values of :meth:`read` (the :class:`rig.session.RigIO` interface)."""
+        """The sensor values of :meth:`read` (the :class:`panto.rig.session.RigIO` interface)."""
         return self.read(now).sensors
 
     def read(self, now: float | None = None) -> PlantSample:
@@ -294,8 +294,8 @@ def _cross_bar_x(parameters: Mapping[str, float]):
     """x_cb(phi1, delta) of the linkage (eq. 2.13) with the given geometry."""
     import sympy as sp
 
-    from fmu_src.models import default_parameters
-    from fmu_src.pantograph import linkage
+    from panto.fmu_src.models import default_parameters
+    from panto.fmu_src.pantograph import linkage
 
     values = {**default_parameters("Pantograph").values, **parameters}
     kin = linkage()

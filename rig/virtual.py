@@ -1,10 +1,10 @@
 """The virtual test bed assembled: drive emulator + plant on a virtual CAN bus, run in lock step.
 
 :func:`run_virtual_profile` is what ``panto rig run PROFILE`` does without hardware: the unchanged
-driver and run loop of :mod:`rig.session` talk real CAN frames (python-can's ``virtual``
-interface) to :class:`rig.drive_emulator.DriveEmulator`, whose slider drives
-:class:`rig.testbed.VirtualTestBed` (the pantograph FMU and the rig's imperfections). A
-:class:`rig.clock.SimulatedClock` steps the emulator once per cycle, so a run takes as long as
+driver and run loop of :mod:`panto.rig.session` talk real CAN frames (python-can's ``virtual``
+interface) to :class:`panto.rig.drive_emulator.DriveEmulator`, whose slider drives
+:class:`panto.rig.testbed.VirtualTestBed` (the pantograph FMU and the rig's imperfections). A
+:class:`panto.rig.clock.SimulatedClock` steps the emulator once per cycle, so a run takes as long as
 its computation, not its duration, and is exactly reproducible. The run folder also receives
 ``truth.csv``: what really happened (true bar height, contact force, marker positions, LED).
 """
@@ -18,13 +18,13 @@ from typing import Any, Callable, Mapping
 
 import can
 
-from rig.clock import SimulatedClock
-from rig.drive import LinearMotorDriver
-from rig.drive_emulator import DriveEmulator, DriveParameters
-from rig.imperfections import RigImperfections
-from rig.profiles import Profile
-from rig.session import RunOptions, RunResult, run_profile
-from rig.testbed import VirtualTestBed
+from panto.rig.clock import SimulatedClock
+from panto.rig.drive import LinearMotorDriver
+from panto.rig.drive_emulator import DriveEmulator, DriveParameters
+from panto.rig.imperfections import RigImperfections
+from panto.rig.profiles import Profile
+from panto.rig.session import RunOptions, RunResult, run_profile
+from panto.rig.testbed import VirtualTestBed
 
 _channels = itertools.count()
 #: File in a virtual run's folder with the plant's hidden quantities at 500 Hz (marker positions,
@@ -58,7 +58,7 @@ def run_virtual_profile(profile: Profile, *, fmu_path: str | Path, folder: str |
     seed : int
         Seed of the sensor noise.
     drive : mapping, optional
-        Overrides of :class:`rig.drive_emulator.DriveParameters` (e.g. bandwidth).
+        Overrides of :class:`panto.rig.drive_emulator.DriveParameters` (e.g. bandwidth).
     options : RunOptions, optional
         Run options; the source is set to ``"emulator"`` and the truth is filled in.
     progress : callable, optional

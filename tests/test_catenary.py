@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 from scipy.sparse.linalg import spsolve
 
-from catenary_cosim.catenary import Catenary
-from catenary_cosim.lines import LINE_DIRECTORY, LINE_NAMES, LineDefinition, load_line
-from catenary_cosim.mesh import GRAVITY
+from panto.catenary_cosim.catenary import Catenary
+from panto.catenary_cosim.lines import LINE_DIRECTORY, LINE_NAMES, LineDefinition, load_line
+from panto.catenary_cosim.mesh import GRAVITY
 
 
 @pytest.fixture(scope="module")

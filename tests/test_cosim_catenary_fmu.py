@@ -1,15 +1,15 @@
 """The catenary as a pythonfmu Co-Simulation FMU, coupled with the TwoMass FMU through fmpy by a
-tiny master, matches the in-process master (catenary_cosim.catenary_fmu)."""
+tiny master, matches the in-process master (panto.catenary_cosim.catenary_fmu)."""
 import json
 
 import numpy as np
 import pytest
 
-from build_fmu.stepping import FmuStepper
-from catenary_cosim.catenary_fmu import build_catenary_fmu
-from catenary_cosim.lines import LINE_DIRECTORY, load_line
-from catenary_cosim.master import cosimulate
-from catenary_cosim.pantographs import pantograph_setup
+from panto.build_fmu.stepping import FmuStepper
+from panto.catenary_cosim.catenary_fmu import build_catenary_fmu
+from panto.catenary_cosim.lines import LINE_DIRECTORY, load_line
+from panto.catenary_cosim.master import cosimulate
+from panto.catenary_cosim.pantographs import pantograph_setup
 
 TIME_STEP, SUBSTEPS, SPEED_KMH = 5e-4, 2, 250.0
 

@@ -1,13 +1,13 @@
-"""``panto cosim`` (panto/commands_cosim.py) and the rig sequence (catenary_cosim.rig_sequence)."""
+"""``panto cosim`` (panto/commands_cosim.py) and the rig sequence (panto.catenary_cosim.rig_sequence)."""
 import dataclasses
 import json
 
 import numpy as np
 import pytest
 
-from catenary_cosim.lines import LINE_DIRECTORY, load_line
-from catenary_cosim.rig_sequence import make_rig_sequence, periodic_sequence, resample_periodic
-from catenary_cosim.statistics import STATISTIC_KEYS
+from panto.catenary_cosim.lines import LINE_DIRECTORY, load_line
+from panto.catenary_cosim.rig_sequence import make_rig_sequence, periodic_sequence, resample_periodic
+from panto.catenary_cosim.statistics import STATISTIC_KEYS
 from panto.cli import main
 
 
@@ -98,10 +98,10 @@ def test_periodic_sequence_recovers_a_known_periodic_signal():
 
 
 def test_rig_sequence_file_format(tmp_path, project_fmus):
-    from fmu_src.response import TimeResponse
+    from panto.fmu_src.response import TimeResponse
 
     line = dataclasses.replace(load_line("thesis-60m"), spans=3, analysed_spans=(2, 2))
-    from catenary_cosim.pantographs import pantograph_setup
+    from panto.catenary_cosim.pantographs import pantograph_setup
 
     setup = pantograph_setup("physical").with_fmu(project_fmus["Pantograph.fmu"].path)
     path = make_rig_sequence(tmp_path / "catenary.csv", line=line, pantograph=setup,

@@ -1,4 +1,4 @@
-"""The co-simulation master (catenary_cosim.master): coupling convergence, contact loss, input checks.
+"""The co-simulation master (panto.catenary_cosim.master): coupling convergence, contact loss, input checks.
 
 A single-mass "line" (a test double with the Catenary interface) coupled with the TwoMass FMU is
 a linear 3-mass system whose exact solution scipy gives independently; the real catenary is used
@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from catenary_cosim.lines import load_line
-from catenary_cosim.master import cosimulate
-from catenary_cosim.pantographs import pantograph_setup, user_pantograph
+from panto.catenary_cosim.lines import load_line
+from panto.catenary_cosim.master import cosimulate
+from panto.catenary_cosim.pantographs import pantograph_setup, user_pantograph
 
 H0 = 5.3  # design contact-wire height of the lines [m]
 REFERENCE = dict(m1=15.0, k1=50.0, c1=90.0, m2=7.2, k2=4200.0, c2=10.0, F_0=120.0, k_E=5e4)
@@ -113,7 +113,7 @@ def test_start_in_equilibrium_with_relaxed_springs_at_the_design_height(setup):
 
 def test_coupling_step_error_vanishes_on_the_catenary(setup, short_line):
     """Fixed catenary step; communication step 4, 2, 1 times it: differences halve."""
-    from catenary_cosim.catenary import Catenary
+    from panto.catenary_cosim.catenary import Catenary
 
     catenary = Catenary(short_line, time_step=2.5e-4, element_length=1.0)
     runs = [cosimulate(catenary, setup, speed_kmh=250.0, communication_step=m * 2.5e-4)
@@ -157,7 +157,7 @@ def test_contact_loss_is_counted_and_means_head_below_wire(project_fmus, short_l
 
 def test_physical_pantograph_height_mapping(project_fmus, short_line):
     """The design wire height maps to eta = 2 m: the first force is the FMU's static force there."""
-    from build_fmu.stepping import FmuStepper
+    from panto.build_fmu.stepping import FmuStepper
 
     path = project_fmus["Pantograph.fmu"].path
     setup = pantograph_setup("physical").with_fmu(path)

@@ -1,10 +1,10 @@
-"""EN 50318 statistics on analytic signals (catenary_cosim.statistics)."""
+"""EN 50318 statistics on analytic signals (panto.catenary_cosim.statistics)."""
 import math
 
 import numpy as np
 import pytest
 
-from catenary_cosim.statistics import (STATISTIC_KEYS, compute_statistics, lowpass_filter,
+from panto.catenary_cosim.statistics import (STATISTIC_KEYS, compute_statistics, lowpass_filter,
                                        sample_rate)
 
 RATE = 2000.0  # Hz

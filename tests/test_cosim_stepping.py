@@ -1,11 +1,11 @@
-"""FmuStepper (build_fmu.stepping): CS and ME agree and match FmuSimulator; state, errors."""
+"""FmuStepper (panto.build_fmu.stepping): CS and ME agree and match FmuSimulator; state, errors."""
 import pickle
 
 import numpy as np
 import pytest
 
-from build_fmu.simulate import FmuSimulator, SimulationError
-from build_fmu.stepping import FmuStepper
+from panto.build_fmu.simulate import FmuSimulator, SimulationError
+from panto.build_fmu.stepping import FmuStepper
 
 STEP = 1e-3
 TIME = STEP * np.arange(401)

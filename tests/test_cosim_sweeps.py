@@ -1,4 +1,4 @@
-"""Sweeps on executors (catenary_cosim.sweeps): a process pool and a local Dask cluster give
+"""Sweeps on executors (panto.catenary_cosim.sweeps): a process pool and a local Dask cluster give
 exactly the numbers of the same runs done in this process."""
 import dataclasses
 import pickle
@@ -6,9 +6,9 @@ from concurrent.futures import ProcessPoolExecutor
 
 import pytest
 
-from catenary_cosim.lines import load_line
-from catenary_cosim.pantographs import pantograph_setup
-from catenary_cosim.sweeps import (CosimulationCase, line_as_data, parameter_study, run_case,
+from panto.catenary_cosim.lines import load_line
+from panto.catenary_cosim.pantographs import pantograph_setup
+from panto.catenary_cosim.sweeps import (CosimulationCase, line_as_data, parameter_study, run_case,
                                    speed_sweep)
 
 OPTIONS = dict(time_step=5e-4, element_length=2.0)

@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 from scipy import signal as sps
 
-from identification.augmentations import AugmentedStructure, mode_response
-from identification.base import IdentificationData, fit_percent
-from identification.diagnosis import diagnose
-from identification.diagnosis_report import write_report
-from identification.diagnosis_support import effective_samples
-from identification.effects import SignalRoles
-from identification.output_error import LinearOutputError, linear_output_error_from_data
+from panto.identification.diagnosis.augmentations import AugmentedStructure, mode_response
+from panto.identification.estimation.base import IdentificationData, fit_percent
+from panto.identification.diagnosis.pipeline import diagnose
+from panto.identification.diagnosis.report import write_report
+from panto.identification.diagnosis.support import effective_samples
+from panto.identification.diagnosis.effects import SignalRoles
+from panto.identification.structures.output_error import LinearOutputError, linear_output_error_from_data
 
 DT = 0.005
 MASS, STIFFNESS, DAMPING = 1.0, (2 * np.pi * 2.0) ** 2, 2 * 0.1 * 2 * np.pi * 2.0
@@ -171,7 +171,7 @@ def test_augmentations_transform_inputs_and_outputs_as_documented():
 
 
 def test_fold_improvements_share_the_whole_run_change_and_ignore_a_quiet_blocks_scale():
-    from identification.diagnosis_support import _fold_improvements
+    from panto.identification.diagnosis.support import _fold_improvements
 
     n = 400
     t = np.arange(n) * 0.01
@@ -193,7 +193,7 @@ def test_fold_improvements_share_the_whole_run_change_and_ignore_a_quiet_blocks_
 
 
 def test_training_only_lists_effects_the_withheld_run_cannot_judge():
-    from identification.diagnosis import _training_only
+    from panto.identification.diagnosis.pipeline import _training_only
 
     def trial(effect, bic, failed):
         return {"effect": effect, "variant": "v", "delta_bic": bic, "improvement": 0.01,

@@ -9,11 +9,11 @@ import math
 import numpy as np
 import pytest
 
-import identification.diagnosis as diagnosis_module
-from identification.diagnosis_benchmark import (LIBRARY_DRAW, OUTSIDE_DRAW, STRONG, BenchmarkCase,
+from panto.identification.diagnosis import pipeline as diagnosis_module
+from panto.identification.diagnosis.benchmark import (LIBRARY_DRAW, OUTSIDE_DRAW, STRONG, BenchmarkCase,
                                                 BenchmarkResult, CaseOutcome, confusion_matrix,
                                                 draw_cases, gap_closed, run_case, score_outcomes)
-from identification.diagnosis_benchmark_report import write_benchmark
+from panto.identification.diagnosis.benchmark_report import write_benchmark
 
 
 def _holds_truth(value) -> bool:

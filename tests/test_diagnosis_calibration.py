@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 from scipy import signal as sps
 
-from identification.base import IdentificationData
-from identification.diagnosis import diagnose
-from identification.diagnosis_support import (RELEVANCE, settling_time, systematic_cost)
-from identification.output_error import linear_output_error_from_data
-from identification.physical import PhysicalLinear
+from panto.identification.estimation.base import IdentificationData
+from panto.identification.diagnosis.pipeline import diagnose
+from panto.identification.diagnosis.support import (RELEVANCE, settling_time, systematic_cost)
+from panto.identification.structures.output_error import linear_output_error_from_data
+from panto.identification.structures.physical import PhysicalLinear
 
 RATE, DURATION = 50.0, 20.0
 

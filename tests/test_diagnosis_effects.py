@@ -15,11 +15,11 @@ import numpy as np
 import pytest
 from scipy import signal as sps
 
-from identification.augmentations import AugmentedStructure, equivalent_input
-from identification.base import IdentificationData
-from identification.diagnosis import Trial, _choose, diagnose
-from identification.effects import PANTOGRAPH_ROLES
-from identification.physical import PhysicalLinear
+from panto.identification.diagnosis.augmentations import AugmentedStructure, equivalent_input
+from panto.identification.estimation.base import IdentificationData
+from panto.identification.diagnosis.pipeline import Trial, _choose, diagnose
+from panto.identification.diagnosis.effects import PANTOGRAPH_ROLES
+from panto.identification.structures.physical import PhysicalLinear
 
 RATE = 50.0
 DURATION = 20.0
@@ -127,7 +127,7 @@ def test_parsimony_decides_between_candidates_the_withheld_data_cannot_tell_apar
 def test_input_side_effects_are_separate_candidates_per_input():
     """A lag on p and a lag on eta are different hypotheses: ranked (and refitted) apart, so the
     better-scoring one on one input cannot hide the other; output-side effects stay whole."""
-    from identification.diagnosis_ranking import _split_per_input
+    from panto.identification.diagnosis.ranking import _split_per_input
 
     x = np.zeros(4)
     regressors = {"actuator_lag": {"lag(eta, 0.08 s)": (x, {"input": "eta"}),

@@ -9,15 +9,15 @@ from pathlib import Path
 
 import pytest
 
-from identification.data import pantograph_data
-from identification.diagnosis import diagnose
+from panto.identification.data.datasets import pantograph_data
+from panto.identification.diagnosis.pipeline import diagnose
 
 
 def _run(folder: Path, seed: int) -> Path:
-    from build_fmu.project import project_fmu
-    from rig.imperfections import RigImperfections
-    from rig.profiles import load_profile
-    from rig.virtual import run_virtual_profile
+    from panto.build_fmu.project import project_fmu
+    from panto.rig.imperfections import RigImperfections
+    from panto.rig.profiles import load_profile
+    from panto.rig.virtual import run_virtual_profile
 
     base = load_profile(Path(__file__).parents[1] / "rig" / "profiles" / "aprbs_training.json")
     profile = dataclasses.replace(base, duration=30.0, seed=base.seed + seed, conditioning=

@@ -18,8 +18,8 @@ import pytest
 import scipy.io
 from scipy import signal as sps
 
-from identification.base import IdentificationData
-from identification.diagnosis import diagnose
+from panto.identification.estimation.base import IdentificationData
+from panto.identification.diagnosis.pipeline import diagnose
 
 SILVERBOX = Path("/work/shared/data/real/silverbox/SNLS80mV.csv")
 EMPS = Path("/work/shared/data/real/emps")

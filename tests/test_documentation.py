@@ -6,17 +6,18 @@ import pkgutil
 
 import pytest
 
-PACKAGES = ("fmu_src", "build_fmu", "catenary_cosim", "rig", "video_sync", "identification",
-            "panto")
+PACKAGES = ("panto.fmu_src", "panto.build_fmu", "panto.catenary_cosim", "panto.rig",
+            "panto.video_sync", "panto.identification", "panto")
 
 
 def _modules():
-    for package in PACKAGES:
-        for info in pkgutil.iter_modules(importlib.import_module(package).__path__, package + "."):
+    for package in PACKAGES:  # subpackages too (identification's trades)
+        yield package
+        for info in pkgutil.walk_packages(importlib.import_module(package).__path__, package + "."):
             yield info.name
 
 
-MODULES = sorted(_modules())
+MODULES = sorted(set(_modules()))
 
 
 def test_every_public_module_class_and_function_has_a_docstring():

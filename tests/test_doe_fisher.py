@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 from scipy.stats import chi2
 
-from identification.fisher import (
+from panto.identification.design.fisher import (
     a_optimality,
     cramer_rao_covariance,
     criterion_cost,

@@ -4,13 +4,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from identification.pantograph_design import RigInputConstraints
-from identification.pantograph_online import (
+from panto.identification.design.pantograph import RigInputConstraints
+from panto.identification.design.pantograph_online import (
     OnlineDesigner,
     design_online_step,
     run_online_design,
 )
-from identification.pantograph_sensitivity import LinearisedPantograph, PressureLag
+from panto.identification.design.pantograph_sensitivity import LinearisedPantograph, PressureLag
 
 CONSTRAINTS = RigInputConstraints(pressure_lag=PressureLag(0.22, 0.02))
 FREE = ("m_c", "c_c", "k_c", "k_p", "c1", "m1")

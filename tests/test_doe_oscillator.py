@@ -7,8 +7,8 @@ import pytest
 from scipy.signal import cont2discrete
 from scipy.stats import chi2
 
-from identification.doe_example import evaluate_input, monte_carlo_covariance
-from identification.doe_oscillator import (
+from panto.identification.design.thesis_example import evaluate_input, monte_carlo_covariance
+from panto.identification.design.oscillator import (
     INITIAL_PHYSICAL,
     NOISE_VARIANCE,
     TRUE_PHYSICAL,
@@ -18,9 +18,9 @@ from identification.doe_oscillator import (
     physical_from_theta,
     two_sine_input,
 )
-from identification.fisher import cramer_rao_covariance, fisher_information
-from identification.input_design import GeneticOptions, InputConstraints, design_offline
-from identification.online_design import OnlineOptions, SimulatedPlant, design_online
+from panto.identification.design.fisher import cramer_rao_covariance, fisher_information
+from panto.identification.design.input_design import GeneticOptions, InputConstraints, design_offline
+from panto.identification.design.online_design import OnlineOptions, SimulatedPlant, design_online
 
 CONSTRAINTS = InputConstraints.symmetric(1.5, 0.25)
 MODEL = TransferFunctionModel()

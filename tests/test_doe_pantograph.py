@@ -4,22 +4,22 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from identification.base import IdentificationData
-from identification.oscillators import OscillatorStructure
-from identification.pantograph_design import (
+from panto.identification.estimation.base import IdentificationData
+from panto.identification.structures.oscillators import OscillatorStructure
+from panto.identification.design.pantograph import (
     DesignOptions,
     RigInputConstraints,
     build_inputs,
     design_pantograph_experiment,
     model_inputs,
 )
-from identification.pantograph_discrimination import (
+from panto.identification.design.discrimination import (
     EffectModel,
     design_discrimination,
     simulate_friction,
 )
-from identification.pantograph_profiles import conventional_inputs, write_design_profile
-from identification.pantograph_sensitivity import LinearisedPantograph, PressureLag
+from panto.identification.design.profiles import conventional_inputs, write_design_profile
+from panto.identification.design.pantograph_sensitivity import LinearisedPantograph, PressureLag
 
 CONSTRAINTS = RigInputConstraints(pressure_lag=PressureLag(0.22, 0.02))
 FREE = ("m1", "m2", "k1", "k2", "c1", "c2", "p_gain", "F_0")
@@ -54,7 +54,7 @@ def _random_inputs(rng, count: int = 5) -> np.ndarray:
 def test_convolution_model_equals_structure_simulation(name):
     """Markov-parameter convolution and sensitivities agree with the structure's own free run
     (exact discretisation + recursion) and its finite differences: two independent paths."""
-    from identification.physical import PhysicalLinear
+    from panto.identification.structures.physical import PhysicalLinear
 
     model = LinearisedPantograph(name, length=400, pressure_lag=None,
                                  free=None if name == "two-mass" else ("m_c", "k_c", "k_p"))
@@ -100,7 +100,7 @@ def test_every_built_input_meets_the_rig_limits():
 
 
 def test_design_meets_constraints_and_loads_as_a_rig_profile(design, two_mass, tmp_path):
-    from rig.profiles import load_profile, render_profile
+    from panto.rig.profiles import load_profile, render_profile
 
     assert max(design.constraints.violations(design.motor_position,
                                               design.pressure_demand).values()) <= 0.0
@@ -127,7 +127,7 @@ def test_fitted_covariance_smaller_on_designed_run(design, two_mass):
     """Monte-Carlo with the structure as the plant (noise only): least-squares fits of the
     designed run report a smaller covariance (determinant) than those of the APRBS run, and
     recover the true parameters."""
-    from identification.least_squares import fit_least_squares
+    from panto.identification.estimation.least_squares import fit_least_squares
 
     structure = OscillatorStructure(2)
     truth = two_mass.parameters
@@ -184,7 +184,7 @@ def test_conventional_input_is_the_conditioned_aprbs():
 
 def test_cli_writes_profile_and_tables(tmp_path):
     from panto.cli import main
-    from rig.profiles import load_profile
+    from panto.rig.profiles import load_profile
 
     out = tmp_path / "doe"
     code = main(["doe", "--model", "two-mass", "--duration", "8", "--population", "6",

@@ -7,12 +7,12 @@ import json
 import numpy as np
 import pytest
 
-from identification.pantograph_design import (
+from panto.identification.design.pantograph import (
     DesignOptions,
     RigInputConstraints,
     design_pantograph_experiment,
 )
-from identification.pantograph_sensitivity import LinearisedPantograph, PressureLag
+from panto.identification.design.pantograph_sensitivity import LinearisedPantograph, PressureLag
 
 CONSTRAINTS = RigInputConstraints(pressure_lag=PressureLag(0.22, 0.02))
 
@@ -21,7 +21,7 @@ def test_designed_run_gives_smaller_reported_covariance_than_aprbs(project_fmus,
     """20 s each on the virtual test bed (sensor noise only), four free parameters of the
     linearised physical model: the least-squares covariance reported from the designed run is
     smaller (determinant) than from the APRBS run of equal length."""
-    from identification.pantograph_profiles import compare_on_virtual_rig
+    from panto.identification.design.profiles import compare_on_virtual_rig
 
     free = ("m_c", "k_c", "k_p", "c1")
     model = LinearisedPantograph("physical-linear", free=free, length=1000,
@@ -55,7 +55,7 @@ def test_cli_three_mass(tmp_path):
 def test_cli_uses_the_parameter_file(tmp_path):
     """A parameter file as `panto identify --out` writes it (the Pantograph parameter set):
     the design is computed at its values."""
-    from fmu_src.models import default_parameters
+    from panto.fmu_src.models import default_parameters
 
     path = tmp_path / "parameters.json"
     default_parameters("Pantograph").with_values({"k_c": 25000.0, "m_c": 7.0}).save(path)

@@ -10,9 +10,9 @@ import can
 import numpy as np
 import pytest
 
-from rig import can_protocol as proto
-from rig.clock import SimulatedClock
-from rig.drive_emulator import DriveEmulator, DriveParameters
+from panto.rig import can_protocol as proto
+from panto.rig.clock import SimulatedClock
+from panto.rig.drive_emulator import DriveEmulator, DriveParameters
 
 T = 0.004
 RUNNING, READY, OFF = 0x003F, 0x003E, 0x0000

@@ -10,7 +10,7 @@ import scipy.io
 from scipy import optimize
 from scipy import signal as sps
 
-from identification.effects import (
+from panto.identification.diagnosis.effects import (
     EFFECTS,
     PANTOGRAPH_ROLES,
     SignalRoles,
@@ -20,7 +20,7 @@ from identification.effects import (
     play_operator,
     rank_effects,
 )
-from identification.residual_analysis import check_nonlinearity
+from panto.identification.diagnosis.residual_analysis import check_nonlinearity
 
 DT = 0.005
 MASS, STIFFNESS, DAMPING = 1.0, (2 * np.pi * 2.0) ** 2, 2 * 0.1 * 2 * np.pi * 2.0

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from identification.base import (IdentificationData, IdentificationError, fit_percent,
+from panto.identification.estimation.base import (IdentificationData, IdentificationError, fit_percent,
                                  identifier)
 
 

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from fmu_src.models import Model
-from identification.base import IdentificationData, IdentificationError, identifier
-from identification.blackbox import fit_state_space, parameter_names
+from panto.fmu_src.models import Model
+from panto.identification.estimation.base import IdentificationData, IdentificationError, identifier
+from panto.identification.structures.blackbox import fit_state_space, parameter_names
 
 PERIOD = 0.02
 

@@ -3,9 +3,9 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from fmu_src.models import Model
-from identification.base import IdentificationData, IdentificationError
-from identification.collector_head import (identify_collector_head, plot_collector_head,
+from panto.fmu_src.models import Model
+from panto.identification.estimation.base import IdentificationData, IdentificationError
+from panto.identification.structures.collector_head import (identify_collector_head, plot_collector_head,
                                            pt2_response)
 
 

@@ -1,4 +1,4 @@
-"""The structures' comparison (identification.comparison, thesis section 4.8)."""
+"""The structures' comparison (panto.identification.estimation.comparison, thesis section 4.8)."""
 import csv
 import json
 
@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from identification.base import (IdentificationData, IdentificationError, Identifier,
+from panto.identification.estimation.base import (IdentificationData, IdentificationError, Identifier,
                                  ModelStructure, all_identifiers)
-from identification.comparison import (ComparisonTable, compare_structures,
+from panto.identification.estimation.comparison import (ComparisonTable, compare_structures,
                                        comparison_identifiers, plot_comparison, plot_validation)
-from identification.least_squares import fit_least_squares
+from panto.identification.estimation.least_squares import fit_least_squares
 
 PERIOD = 0.02
 OUTPUTS = ("y_cb", "F_c")

@@ -9,9 +9,9 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 import pytest
 
-from identification.base import IdentificationData, IdentificationError, ModelStructure, fit_percent
-from identification.data import pantograph_data
-from identification.least_squares import fit_least_squares
+from panto.identification.estimation.base import IdentificationData, IdentificationError, ModelStructure, fit_percent
+from panto.identification.data.datasets import pantograph_data
+from panto.identification.estimation.least_squares import fit_least_squares
 
 
 # --- a small structure with a known answer ---------------------------------------------------
@@ -56,7 +56,7 @@ def first_order_data(noise: float = 0.02, seed: int = 1, n: int = 2000) -> tuple
 # --- data ---------------------------------------------------------------------------------
 
 def _rig_dataset(extra):
-    from rig.dataset import Dataset, RunMetadata
+    from panto.rig.dataset import Dataset, RunMetadata
 
     n = 1000
     time = np.arange(n) * 0.002

@@ -1,4 +1,4 @@
-"""NSGA-II identification (identification.genetic): the front, recovery, parallel populations, polish."""
+"""NSGA-II identification (panto.identification.estimation.genetic): the front, recovery, parallel populations, polish."""
 import sys
 import types
 from concurrent.futures import ProcessPoolExecutor
@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from identification.base import IdentificationData, IdentificationError, ModelStructure
-from identification import genetic
-from identification.genetic import ParetoResult, fit_pareto, plot_pareto, polish_cost
+from panto.identification.estimation.base import IdentificationData, IdentificationError, ModelStructure
+from panto.identification.estimation import genetic
+from panto.identification.estimation.genetic import ParetoResult, fit_pareto, plot_pareto, polish_cost
 
 PERIOD = 0.02
 
@@ -182,9 +182,9 @@ def _fake_least_squares(shift):
 
 def test_polish_keeps_the_pareto_solution_when_least_squares_is_worse(monkeypatch,
                                                                       conflicting_front):
-    fake = types.ModuleType("identification.least_squares")
+    fake = types.ModuleType("panto.identification.estimation.least_squares")
     fake.fit_least_squares = _fake_least_squares(0.3)
-    monkeypatch.setitem(sys.modules, "identification.least_squares", fake)
+    monkeypatch.setitem(sys.modules, "panto.identification.estimation.least_squares", fake)
     data = conflicting_data()
     chosen = conflicting_front.pick(rule="best:F_c")
     kept = conflicting_front.polish(chosen, data)
@@ -193,7 +193,7 @@ def test_polish_keeps_the_pareto_solution_when_least_squares_is_worse(monkeypatc
 
 
 def test_polish_by_levenberg_marquardt_never_worsens(tmp_path):
-    pytest.importorskip("identification.least_squares")
+    pytest.importorskip("panto.identification.estimation.least_squares")
     truth = {"k": 120.0, "c": 4.0, "b": 3.0}
     data = oscillator_data(truth)
     rng = np.random.default_rng(7)

@@ -9,10 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from identification.base import IdentificationData, IdentificationError
-from identification.data import delay_signal, pantograph_data
-from identification.least_squares import fit_least_squares
-from identification.physical import PhysicalLinear, PhysicalNonlinear
+from panto.identification.estimation.base import IdentificationData, IdentificationError
+from panto.identification.data.datasets import delay_signal, pantograph_data
+from panto.identification.estimation.least_squares import fit_least_squares
+from panto.identification.structures.physical import PhysicalLinear, PhysicalNonlinear
 
 
 @pytest.mark.parametrize("delay", [0.3, 2.5, -1.7, 4.0])
@@ -40,10 +40,10 @@ def test_delay_signal_is_continuous_in_the_delay():
 @pytest.fixture(scope="module")
 def ideal_run(tmp_path_factory):
     """10 s of the training APRBS on the ideal virtual test bed (no noise)."""
-    from build_fmu.project import project_fmu
-    from rig.imperfections import RigImperfections
-    from rig.profiles import load_profile
-    from rig.virtual import run_virtual_profile
+    from panto.build_fmu.project import project_fmu
+    from panto.rig.imperfections import RigImperfections
+    from panto.rig.profiles import load_profile
+    from panto.rig.virtual import run_virtual_profile
 
     profile = load_profile(Path(__file__).parents[1] / "rig" / "profiles" / "aprbs_training.json")
     profile = dataclasses.replace(profile, duration=10.0)
@@ -56,7 +56,7 @@ def ideal_run(tmp_path_factory):
 def test_the_drive_reports_the_slider_two_and_a_half_samples_late(ideal_run):
     """motor_position[k] is the slider at sample k - 2 (even k) or k - 3 (odd k): the position
     sampled at a SYNC reaches the master one 250 Hz cycle later and is held two samples."""
-    from rig.dataset import read_dataset
+    from panto.rig.dataset import read_dataset
 
     run = read_dataset(ideal_run, required=())
     truth = read_dataset(ideal_run / "truth.csv", required=())
@@ -74,7 +74,7 @@ def test_the_drive_reports_the_slider_two_and_a_half_samples_late(ideal_run):
 
 def test_pantograph_data_advances_the_position_by_the_latency(ideal_run):
     """At 50 Hz the advanced position agrees with the true slider height far better."""
-    from rig.dataset import read_dataset
+    from panto.rig.dataset import read_dataset
 
     truth = read_dataset(ideal_run / "truth.csv", required=())
     errors = {}
@@ -90,7 +90,7 @@ def test_pantograph_data_advances_the_position_by_the_latency(ideal_run):
 
 
 def test_the_rig_setup_latency_is_the_default(ideal_run):
-    from rig.dataset import read_dataset
+    from panto.rig.dataset import read_dataset
 
     run = read_dataset(ideal_run, required=())
     extra = {**run.metadata.extra, "rig_setup": {**run.metadata.extra["rig_setup"],

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from fmu_src.models import Model
-from identification.base import IdentificationData, IdentificationError, identifier
-from identification.oscillators import OscillatorStructure, coulomb_flow, identify_oscillator
+from panto.fmu_src.models import Model
+from panto.identification.estimation.base import IdentificationData, IdentificationError, identifier
+from panto.identification.structures.oscillators import OscillatorStructure, coulomb_flow, identify_oscillator
 
 PERIOD = 0.02  # 50 Hz, the identification rate (thesis 4.2)
 

@@ -8,9 +8,9 @@ import math
 import numpy as np
 import pytest
 
-from identification.base import IdentificationData, IdentificationError, fit_percent
-from identification.least_squares import fit_least_squares
-from identification.physical import TABLE_4_1, PhysicalLinear, PhysicalNonlinear
+from panto.identification.estimation.base import IdentificationData, IdentificationError, fit_percent
+from panto.identification.estimation.least_squares import fit_least_squares
+from panto.identification.structures.physical import TABLE_4_1, PhysicalLinear, PhysicalNonlinear
 
 
 def _inputs(duration: float, eta_amplitude: float, p_amplitude: float) -> IdentificationData:
@@ -23,7 +23,7 @@ def _inputs(duration: float, eta_amplitude: float, p_amplitude: float) -> Identi
 
 @pytest.fixture(scope="module")
 def linear_fmu():
-    from build_fmu.project import project_fmu
+    from panto.build_fmu.project import project_fmu
 
     return project_fmu("PantographLinear")
 
@@ -31,7 +31,7 @@ def linear_fmu():
 def test_physical_linear_agrees_with_the_linear_fmu(linear_fmu):
     """Two paths: the structure's own linearisation and discretisation against the C code of
     PantographLinear (linearised about eta0, p0) integrated by CVODE with linear inputs."""
-    from build_fmu.simulate import FmuSimulator
+    from panto.build_fmu.simulate import FmuSimulator
 
     data = _inputs(10.0, 0.01, 0.3)
     parameters = {"m_c": 7.0, "k_c": 18000.0, "c1": 350.0, "k_p": 250.0}
@@ -90,10 +90,10 @@ def test_bad_physical_options_are_refused():
 @pytest.fixture(scope="module")
 def noisy_run(tmp_path_factory):
     """30 s of the training APRBS on the virtual test bed, ideal rig plus sensor noise."""
-    from build_fmu.project import project_fmu
-    from rig.imperfections import RigImperfections
-    from rig.profiles import load_profile
-    from rig.virtual import run_virtual_profile
+    from panto.build_fmu.project import project_fmu
+    from panto.rig.imperfections import RigImperfections
+    from panto.rig.profiles import load_profile
+    from panto.rig.virtual import run_virtual_profile
 
     profile = load_profile(__import__("pathlib").Path(__file__).parents[1]
                            / "rig" / "profiles" / "aprbs_training.json")
@@ -124,9 +124,9 @@ def test_table_4_1_from_the_virtual_test_bed(noisy_run):
     (m2, m3) are named not identifiable with the Fisher information's reason; every identifiable
     parameter lies within its 95 % interval. The intervals take the colour of the noise into
     account (the 20 Hz low-pass of the resampling makes it strongly coloured at 100 Hz; with a
-    white-noise covariance m_c, k_c and k_ph were 2.5-3 sigma off, see identification.uncertainty).
+    white-noise covariance m_c, k_c and k_ph were 2.5-3 sigma off, see panto.identification.estimation.uncertainty).
     """
-    from identification.data import pantograph_data
+    from panto.identification.data.datasets import pantograph_data
 
     data = pantograph_data(noisy_run, position_latency=DRIVE_LATENCY, rate=100.0)
     structure = PhysicalLinear()
@@ -151,9 +151,9 @@ def test_table_4_1_from_the_virtual_test_bed(noisy_run):
 
 
 def test_panto_identify_writes_a_parameter_file_the_model_accepts(noisy_run, tmp_path, capsys):
-    from fmu_src.models import default_parameters
-    from fmu_src.parameters import ParameterSet
-    from identification.physical import linearise
+    from panto.fmu_src.models import default_parameters
+    from panto.fmu_src.parameters import ParameterSet
+    from panto.identification.structures.physical import linearise
     from panto.cli import main
 
     out = tmp_path / "identified"
@@ -162,7 +162,7 @@ def test_panto_identify_writes_a_parameter_file_the_model_accepts(noisy_run, tmp
                  str(tmp_path / "summary.json")])
     printed = capsys.readouterr().out
     assert code == 0 and "k_p" in printed and "fit on training" in printed
-    # what fmu_src.models.load_parameters reads (without its linkage check, which would compile
+    # what panto.fmu_src.models.load_parameters reads (without its linkage check, which would compile
     # the full symbolic model here for a minute)
     params = ParameterSet.load(out / "parameters.json", default_parameters("Pantograph").specs,
                                "Pantograph")

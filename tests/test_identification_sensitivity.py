@@ -1,11 +1,11 @@
-"""Eigenvalue sensitivity of the linearised pantograph (identification.sensitivity, thesis Fig. 4.9)."""
+"""Eigenvalue sensitivity of the linearised pantograph (panto.identification.structures.sensitivity, thesis Fig. 4.9)."""
 import json
 
 import numpy as np
 import pytest
 
-from fmu_src.models import default_parameters
-from identification.sensitivity import (TABLE_4_1, eigenvalue_sensitivity, linearised_eigenvalues,
+from panto.fmu_src.models import default_parameters
+from panto.identification.structures.sensitivity import (TABLE_4_1, eigenvalue_sensitivity, linearised_eigenvalues,
                                         match_modes, plot_eigenvalue_sensitivity)
 
 MASSES = ("m1", "m2", "m3", "m4", "m_c")
@@ -93,7 +93,7 @@ def test_bad_input_is_named():
 
 
 def test_panto_sensitivity_command_writes_the_ranking(tmp_path, capsys):
-    from fmu_src.models import default_parameters
+    from panto.fmu_src.models import default_parameters
     from panto.cli import main
 
     parameters = default_parameters("Pantograph").with_values({"k_ph": 50000.0})

@@ -5,10 +5,10 @@ import pytest
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Model
 
-from build_fmu.crosscheck import check_fmu_with_toolbox, simulate_in_independent_importer
-from build_fmu.simulate import FmuSimulator
-from fmu_src.models import FMU_NAMES, Model
-from fmu_src.simulation import simulate_model
+from panto.build_fmu.crosscheck import check_fmu_with_toolbox, simulate_in_independent_importer
+from panto.build_fmu.simulate import FmuSimulator
+from panto.fmu_src.models import FMU_NAMES, Model
+from panto.fmu_src.simulation import simulate_model
 
 FILES = [f"{name}{suffix}.fmu" for name in FMU_NAMES for suffix in ("", "_fmi3")]
 

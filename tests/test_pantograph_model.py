@@ -3,9 +3,9 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from fmu_src.models import Model, default_parameters, numeric_model
-from fmu_src.pantograph import linkage
-from fmu_src.simulation import simulate_model
+from panto.fmu_src.models import Model, default_parameters, numeric_model
+from panto.fmu_src.pantograph import linkage
+from panto.fmu_src.simulation import simulate_model
 
 PARAMS = default_parameters("Pantograph")
 

@@ -4,11 +4,11 @@ import json
 import numpy as np
 import pytest
 
-from fmu_src.models import Model, default_parameters, load_parameters
-from fmu_src.parameters import ParameterError
+from panto.fmu_src.models import Model, default_parameters, load_parameters
+from panto.fmu_src.parameters import ParameterError
 from panto.cli import main
-from rig.dataset import read_dataset
-from rig.profiles import load_profile
+from panto.rig.dataset import read_dataset
+from panto.rig.profiles import load_profile
 
 
 def test_parameter_file_round_trip_keeps_values_units_and_provenance(tmp_path):

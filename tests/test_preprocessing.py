@@ -5,10 +5,10 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from identification.preprocessing import (PreprocessingError, check_aliasing, design_lowpass,
+from panto.identification.data.preprocessing import (PreprocessingError, check_aliasing, design_lowpass,
                                           lowpass_zero_phase, plot_aliasing_check,
                                           resample_dataset)
-from rig.dataset import Dataset, RunMetadata
+from panto.rig.dataset import Dataset, RunMetadata
 
 
 def _dataset(rate: float, duration: float, channels, unit: str = "N") -> Dataset:
@@ -146,7 +146,7 @@ def test_aliasing_check_refuses_equal_rates_and_missing_channels():
 
 def test_panto_preprocess_and_aliasing_check_commands(tmp_path, capsys):
     from panto.cli import main
-    from rig.dataset import read_dataset
+    from panto.rig.dataset import read_dataset
 
     components = [(1.0, 5.0), (3.0, 1.0), (245.0, 0.5)]
     first = _dataset(500.0, 20.0, {"force": _force(components, 3)})

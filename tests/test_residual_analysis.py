@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from scipy import signal as sps
 
-from identification import residual_plots
-from identification.residual_analysis import (
+from panto.identification.diagnosis import residual_plots
+from panto.identification.diagnosis.residual_analysis import (
     analyse_residuals,
     check_cross_correlation,
     check_nonlinearity,
@@ -19,7 +19,7 @@ from identification.residual_analysis import (
     excited_lines,
     fit_error_model,
 )
-from identification.residual_energy import (
+from panto.identification.diagnosis.residual_energy import (
     energy_by_band,
     energy_by_condition,
     energy_by_segment,
@@ -196,7 +196,7 @@ def test_analyse_residuals_is_json_ready_and_plots(tmp_path):
 def test_error_model_is_only_tested_where_the_input_carries_power():
     from scipy import signal as sps
 
-    from identification.residual_analysis import fit_error_model
+    from panto.identification.diagnosis.residual_analysis import fit_error_model
 
     rng = np.random.default_rng(7)
     dt = 0.02

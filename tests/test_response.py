@@ -1,4 +1,4 @@
-"""Behaviour of :class:`fmu_src.response.TimeResponse`: access, files, resampling, checks, plots."""
+"""Behaviour of :class:`panto.fmu_src.response.TimeResponse`: access, files, resampling, checks, plots."""
 from __future__ import annotations
 
 import json
@@ -7,7 +7,7 @@ import pickle
 import numpy as np
 import pytest
 
-from fmu_src.response import (TimeResponse, format_header, is_close, metadata_path_for,
+from panto.fmu_src.response import (TimeResponse, format_header, is_close, metadata_path_for,
                               parse_header)
 
 

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from rig import can_protocol as proto
-from rig.clock import RealClock, SimulatedClock, Ticker
-from rig.drive import BusFault, DriveFault, LinearMotorDriver, ProtocolError, RigError, open_bus
-from rig.drive_emulator import DriveEmulator
+from panto.rig import can_protocol as proto
+from panto.rig.clock import RealClock, SimulatedClock, Ticker
+from panto.rig.drive import BusFault, DriveFault, LinearMotorDriver, ProtocolError, RigError, open_bus
+from panto.rig.drive_emulator import DriveEmulator
 
 T = 0.004  # stream period of the thesis' rig (250 Hz)
 STEP_LIMIT = 0.005  # the rig's limiter: 5 mm per sample

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from panto.cli import main
-from rig.dataset import read_dataset
+from panto.rig.dataset import read_dataset
 
 PROFILES = Path(__file__).resolve().parent.parent / "rig" / "profiles"
 

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from rig.conditioning import (ConditioningOptions, DynamicBlend, MotorConditioner, MotorLimits,
+from panto.rig.conditioning import (ConditioningOptions, DynamicBlend, MotorConditioner, MotorLimits,
                               ReferenceFilter, following_error_bound, minimum_loop_bandwidth)
 
 T = 0.004  # 250 Hz stream

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 from scipy.io import loadmat, savemat
 
-from rig.dataset import (REQUIRED_CHANNELS, STANDARD_CHANNELS, Dataset, DatasetError,
+from panto.rig.dataset import (REQUIRED_CHANNELS, STANDARD_CHANNELS, Dataset, DatasetError,
                          RunMetadata, read_dataset)
-from rig.recorder import Recorder, new_run_folder
+from panto.rig.recorder import Recorder, new_run_folder
 
 N = 1500
 
@@ -192,8 +192,8 @@ def test_crash_loses_at_most_the_last_buffer_and_a_torn_line_is_reported(tmp_pat
     folder = tmp_path / "crashed"
     script = textwrap.dedent(f"""
         import os
-        from rig.dataset import RunMetadata, REQUIRED_CHANNELS
-        from rig.recorder import Recorder
+        from panto.rig.dataset import RunMetadata, REQUIRED_CHANNELS
+        from panto.rig.recorder import Recorder
         rec = Recorder({str(folder)!r}, channels=REQUIRED_CHANNELS,
                        metadata=RunMetadata(sample_rate=500.0, source="emulator"),
                        buffer_rows=500)

@@ -4,8 +4,8 @@ import math
 import numpy as np
 import pytest
 
-from rig.pneumatics import ValveParameters, ValvePlant
-from rig.pressure import PressureController, PressureControllerOptions
+from panto.rig.pneumatics import ValveParameters, ValvePlant
+from panto.rig.pressure import PressureController, PressureControllerOptions
 
 DT = 0.002
 

@@ -10,13 +10,13 @@ import can
 import numpy as np
 import pytest
 
-from rig.can_protocol import ErrorCode
-from rig.dataset import read_dataset
-from rig.drive import LinearMotorDriver
-from rig.clock import RealClock
-from rig.imperfections import RigImperfections
-from rig.profiles import profile_from_dict
-from rig.realtime import (REALTIME_DRIVE_SETTINGS, RealtimeOptions, drive_parameters,
+from panto.rig.can_protocol import ErrorCode
+from panto.rig.dataset import read_dataset
+from panto.rig.drive import LinearMotorDriver
+from panto.rig.clock import RealClock
+from panto.rig.imperfections import RigImperfections
+from panto.rig.profiles import profile_from_dict
+from panto.rig.realtime import (REALTIME_DRIVE_SETTINGS, RealtimeOptions, drive_parameters,
                           run_virtual_profile_realtime, serve_emulator)
 
 _DRIVE_CODES = {int(code) for code in ErrorCode}

@@ -4,11 +4,11 @@ import json
 import numpy as np
 import pytest
 
-from rig.can_protocol import ErrorCode
-from rig.dataset import read_dataset
-from rig.imperfections import RigImperfections
-from rig.profiles import profile_from_dict
-from rig.virtual import run_virtual_profile
+from panto.rig.can_protocol import ErrorCode
+from panto.rig.dataset import read_dataset
+from panto.rig.imperfections import RigImperfections
+from panto.rig.profiles import profile_from_dict
+from panto.rig.virtual import run_virtual_profile
 
 
 @pytest.fixture(scope="module")
@@ -91,7 +91,7 @@ def test_a_step_the_limiter_would_catch_trips_the_drive_and_the_run_stops_safely
 
 def test_a_silent_drive_is_detected_and_nothing_recorded_is_lost(pantograph_fmu, tmp_path,
                                                                   monkeypatch):
-    import rig.virtual as virtual
+    from panto.rig import virtual as virtual
 
     original = virtual.DriveEmulator
 

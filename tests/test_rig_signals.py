@@ -13,12 +13,12 @@ import pytest
 from scipy import signal as sps
 from scipy import stats
 
-from fmu_src.response import TimeResponse
-from rig.profiles import (ProfileError, ProfileStream, load_profile, profile_from_dict,
+from panto.fmu_src.response import TimeResponse
+from panto.rig.profiles import (ProfileError, ProfileStream, load_profile, profile_from_dict,
                           profile_to_dict, render_profile, save_profile)
-from rig.signals import (SIGNAL_TYPES, Aprbs, Chirp, Multisine, Ramps, RealiseContext, Replay,
+from panto.rig.signals import (SIGNAL_TYPES, Aprbs, Chirp, Multisine, Ramps, RealiseContext, Replay,
                          Steps, signal_from_dict)
-from rig.sync_led import LedOptions, LedStream, generate_led_bits, run_lengths
+from panto.rig.sync_led import LedOptions, LedStream, generate_led_bits, run_lengths
 
 FS = 500.0
 PROFILES = Path(__file__).resolve().parents[1] / "rig" / "profiles"

@@ -5,10 +5,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from fmu_src.models import Model
-from fmu_src.simulation import simulate_model
-from rig.imperfections import RigImperfections
-from rig.testbed import VirtualTestBed
+from panto.fmu_src.models import Model
+from panto.fmu_src.simulation import simulate_model
+from panto.rig.imperfections import RigImperfections
+from panto.rig.testbed import VirtualTestBed
 
 DT = 0.002
 

@@ -1,4 +1,4 @@
-"""Simulating FMUs with :mod:`build_fmu.simulate`: physics, agreement, reuse, errors.
+"""Simulating FMUs with :mod:`panto.build_fmu.simulate`: physics, agreement, reuse, errors.
 
 The toy FMUs of ``tests/fixtures/toy_model.py`` (a mass on a spring and damper, pushed by
 ``gain * p`` and touching the contact line ``eta`` through the contact spring ``k_E``) are built
@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from build_fmu import build_fmu
-from build_fmu.simulate import (FmuSimulator, PiecewiseLinearInputs, SimulationError,
+from panto.build_fmu import build_fmu
+from panto.build_fmu.simulate import (FmuSimulator, PiecewiseLinearInputs, SimulationError,
                                 UnknownVariableError, simulate_fmu_with_inputs)
 from tests.fixtures.toy_model import (ToyParameters, analytic_equilibrium, analytic_matrices,
                                       make_toy_spec)

@@ -14,12 +14,12 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from identification.augmentations import AugmentedStructure
-from identification.base import IdentificationData, fit_percent
-from identification.effects import PANTOGRAPH_ROLES
-from identification.oscillators import OscillatorStructure
-from identification.physical import PhysicalLinear, PhysicalNonlinear
-from identification.unilateral_contact import UnilateralContact, contact_column
+from panto.identification.diagnosis.augmentations import AugmentedStructure
+from panto.identification.estimation.base import IdentificationData, fit_percent
+from panto.identification.diagnosis.effects import PANTOGRAPH_ROLES
+from panto.identification.structures.oscillators import OscillatorStructure
+from panto.identification.structures.physical import PhysicalLinear, PhysicalNonlinear
+from panto.identification.diagnosis.unilateral_contact import UnilateralContact, contact_column
 
 OUTPUTS = ("y_cb", "xi", "F_c")
 PERIOD = 0.02
@@ -134,7 +134,7 @@ def test_in_flight_the_head_ignores_the_wire():
 def test_oscillators_match_their_symbolic_model_with_the_unilateral_switch(masses):
     """The oscillators are linear: the switched structure must reproduce the fmu_src model
     (lambdified sympy with its own Piecewise contact) integrated by DOP853."""
-    from fmu_src.models import Model
+    from panto.fmu_src.models import Model
 
     nominal = OscillatorStructure(masses, outputs=OUTPUTS)
     parameters = _oscillator_parameters(masses)

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from video_sync.video_io import (VideoError, VideoWriter, read_frame_views, read_frames,
+from panto.video_sync.video_io import (VideoError, VideoWriter, read_frame_views, read_frames,
                                  video_info)
 
 WIDTH, HEIGHT = 160, 96

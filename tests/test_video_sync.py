@@ -6,10 +6,10 @@ import json
 import numpy as np
 import pytest
 
-from rig.dataset import Dataset, RunMetadata, read_dataset
-from rig.sync_led import generate_led_bits
-from video_sync.merge import TrackError, read_track, sync_and_merge
-from video_sync.synchronisation import SyncError, plot_synchronisation, synchronise
+from panto.rig.dataset import Dataset, RunMetadata, read_dataset
+from panto.rig.sync_led import generate_led_bits
+from panto.video_sync.merge import TrackError, read_track, sync_and_merge
+from panto.video_sync.synchronisation import SyncError, plot_synchronisation, synchronise
 
 RATE, FPS, DECIMATION = 500.0, 50.0, 10
 MARKERS = ("pan_head", "cross_bar", "slider", "reference")
@@ -303,12 +303,12 @@ def test_panto_sync_merges_and_a_refusal_exits_non_zero_writing_nothing(syntheti
 
 
 def test_virtual_run_rendered_tracked_and_merged_agrees_with_the_truth(tmp_path):
-    from build_fmu.project import project_fmu
-    from rig.profiles import profile_from_dict
-    from rig.virtual import run_virtual_profile
-    from video_sync.camera import CameraSetup, render_run
-    from video_sync.setup import setup_from_camera
-    from video_sync.tracking import track_video
+    from panto.build_fmu.project import project_fmu
+    from panto.rig.profiles import profile_from_dict
+    from panto.rig.virtual import run_virtual_profile
+    from panto.video_sync.camera import CameraSetup, render_run
+    from panto.video_sync.setup import setup_from_camera
+    from panto.video_sync.tracking import track_video
 
     profile = profile_from_dict({
         "name": "video", "duration": 6.0, "seed": 5,

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from rig.dataset import Dataset, RunMetadata
-from video_sync.camera import CameraSetup, ShadowEvent, render_run
-from video_sync.setup import make_setup, plot_detection_steps, setup_from_camera
-from video_sync.tracking import (SetupError, TrackerSetup, TrackResult, disk_footprint,
+from panto.rig.dataset import Dataset, RunMetadata
+from panto.video_sync.camera import CameraSetup, ShadowEvent, render_run
+from panto.video_sync.setup import make_setup, plot_detection_steps, setup_from_camera
+from panto.video_sync.tracking import (SetupError, TrackerSetup, TrackResult, disk_footprint,
                                  isodata_threshold, track_video)
 
 SHADOW = ShadowEvent("cross_bar", first_frame=30, frame_count=12)
@@ -271,7 +271,7 @@ def test_cli_renders_sets_up_and_tracks(tmp_path, capsys):
 @pytest.fixture(scope="module")
 def short_gops(lossless, tmp_path_factory):
     """The lossless clip re-encoded as H.264 4:4:4 (B-frames) with a keyframe every 10 frames."""
-    from video_sync.video_io import VideoWriter, read_frames
+    from panto.video_sync.video_io import VideoWriter, read_frames
 
     _, result, _ = lossless
     path = tmp_path_factory.mktemp("gops") / "short-gops.mp4"
@@ -285,7 +285,7 @@ def short_gops(lossless, tmp_path_factory):
 
 
 def test_writer_places_keyframes_at_the_interval(lossless, short_gops):
-    from video_sync.video_io import split_at_keyframes, video_info
+    from panto.video_sync.video_io import split_at_keyframes, video_info
 
     path, _, result = short_gops
     segments = split_at_keyframes(path, 1000)  # more parts than groups: one segment per group
@@ -302,7 +302,7 @@ def test_writer_places_keyframes_at_the_interval(lossless, short_gops):
 
 
 def test_a_segment_decodes_the_same_pixels_as_the_whole_file(short_gops):
-    from video_sync.video_io import read_frame_views, split_at_keyframes
+    from panto.video_sync.video_io import read_frame_views, split_at_keyframes
 
     path, _, _ = short_gops
     whole = [(v.index, v.time, v.crop(0, 0, 64, 48)) for v in read_frame_views(path)]

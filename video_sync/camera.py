@@ -33,7 +33,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from video_sync.video_io import VideoWriter
+from panto.video_sync.video_io import VideoWriter
 
 CAMERA_FORMAT = "panto-camera-video"
 _SUPERSAMPLING = 8
@@ -349,8 +349,8 @@ class CameraRenderer:
 
 
 def _load_truth(source: Any):
-    from rig.dataset import Dataset, read_csv
-    from rig.virtual import TRUTH_FILE
+    from panto.rig.dataset import Dataset, read_csv
+    from panto.rig.virtual import TRUTH_FILE
 
     if isinstance(source, Dataset):
         return source, None
@@ -383,7 +383,7 @@ def render_run(source: Any, out_path: str | Path, *, setup: CameraSetup | None =
 
     Parameters
     ----------
-    source : str, pathlib.Path or rig.dataset.Dataset
+    source : str, pathlib.Path or panto.rig.dataset.Dataset
         A virtual run folder (its ``truth.csv``), a truth CSV file, or a truth dataset at 500 Hz
         with the channels the markers use (``x_cb``, ``y_cb``, ``xi``, ``eta``) and ``led``.
     out_path : str or pathlib.Path
@@ -398,7 +398,7 @@ def render_run(source: Any, out_path: str | Path, *, setup: CameraSetup | None =
     crf : float
         libx264 quality for the H.264 codecs.
     preset : str, optional
-        libx264 speed preset (default: :class:`video_sync.video_io.VideoWriter`'s).
+        libx264 speed preset (default: :class:`panto.video_sync.video_io.VideoWriter`'s).
     progress : callable, optional
 
     Returns

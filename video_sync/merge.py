@@ -2,9 +2,9 @@
 
 Steps of :func:`sync_and_merge`:
 
-1. read the run (:func:`rig.dataset.read_dataset`) and the track file (:func:`read_track`);
+1. read the run (:func:`panto.rig.dataset.read_dataset`) and the track file (:func:`read_track`);
 2. align the camera's LED bits with the run's ``led`` channel
-   (:func:`video_sync.synchronisation.synchronise`): camera frame ``k`` shows the LED command of
+   (:func:`panto.video_sync.synchronisation.synchronise`): camera frame ``k`` shows the LED command of
    fine sample ``shift + 10 k``;
 3. the image of frame ``k`` belongs to fine sample ``n_k = shift + led_delay + 10 k``: the run loop
    writes the LED *after* reading sample ``n``'s sensors, so the light shows from then until
@@ -28,8 +28,8 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from rig.dataset import Dataset, read_dataset
-from video_sync.synchronisation import SyncError, SyncResult, plot_synchronisation, synchronise
+from panto.rig.dataset import Dataset, read_dataset
+from panto.video_sync.synchronisation import SyncError, SyncResult, plot_synchronisation, synchronise
 
 TRACK_FORMAT = "panto-video-track"
 #: Markers that do not move with the pantograph (not merged).
@@ -128,7 +128,7 @@ def _check_bits(values: np.ndarray, name: str, path: Path) -> None:
 
 def read_track(path: str | Path) -> Track:
     """Read a track CSV and its ``<name>.csv.json`` side file (format in the module notes of
-    :mod:`video_sync.tracking`), checking columns, frame numbers, bits and valid positions.
+    :mod:`panto.video_sync.tracking`), checking columns, frame numbers, bits and valid positions.
 
     Raises
     ------
@@ -283,7 +283,7 @@ def sync_and_merge(run_folder: str | Path, track_csv: str | Path, out_folder: st
     """Synchronise a track with a run and write the merged dataset ``<out_folder>/run.csv``.
 
     Nothing is written when the synchronisation is refused (:class:`SyncError`) or an input is
-    malformed (:class:`TrackError`, :class:`rig.dataset.DatasetError`).
+    malformed (:class:`TrackError`, :class:`panto.rig.dataset.DatasetError`).
 
     Parameters
     ----------
@@ -295,7 +295,7 @@ def sync_and_merge(run_folder: str | Path, track_csv: str | Path, out_folder: st
     interpolation, led_delay
         See :func:`merge_video`.
     min_confidence, min_peak_ratio, min_overlap
-        See :func:`video_sync.synchronisation.synchronise`.
+        See :func:`panto.video_sync.synchronisation.synchronise`.
     min_led_quality : float
         Camera LED bits of lower quality count as unknown.
     plot : str or pathlib.Path, optional

@@ -7,7 +7,7 @@ What the thesis' routine asked of the user, done from rough clicks:
 - the reference colour: the mean RGB of a small disc patch (radius `patch_radius`) around the click,
   inside the marker;
 - the threshold: chosen automatically from the histogram of the similarity values
-  (:func:`video_sync.tracking.similarity`) in a window around the click, as the two-cluster
+  (:func:`panto.video_sync.tracking.similarity`) in a window around the click, as the two-cluster
   (isodata) threshold between marker and background, i.e. half way between their mean
   similarities; a pixel half covered by the marker lies there, so the thresholded blob has the
   marker's area. It can be overridden per marker;
@@ -28,10 +28,10 @@ from typing import Any, Mapping
 import numpy as np
 from scipy import ndimage
 
-from video_sync.camera import CameraSetup, load_camera_json
-from video_sync.tracking import (LedSetup, MarkerSetup, SetupError, TrackerSetup, detect_marker,
+from panto.video_sync.camera import CameraSetup, load_camera_json
+from panto.video_sync.tracking import (LedSetup, MarkerSetup, SetupError, TrackerSetup, detect_marker,
                                  disk_footprint, isodata_threshold, similarity)
-from video_sync.video_io import FrameView, VideoError, read_frame_views
+from panto.video_sync.video_io import FrameView, VideoError, read_frame_views
 
 #: Marker speed [m/s] the default plausible step allows (one frame at 50 frames/s).
 MAX_SPEED = 1.0

@@ -1,6 +1,6 @@
 """Aligning the camera's LED bits with the rig's 500 Hz LED output (thesis section 3.2).
 
-The rig drives an LED with a pseudo-random binary sequence (holds of 6-30 ms, :mod:`rig.sync_led`);
+The rig drives an LED with a pseudo-random binary sequence (holds of 6-30 ms, :mod:`panto.rig.sync_led`);
 the 50 Hz camera, with a 2 ms shutter, sees one fine sample in ten. If camera frame ``k`` shows
 fine sample ``shift + 10 k``, then for each start phase ``p = 0..9`` the camera sequence equals the
 fine LED decimated from ``p`` (``d_p[j] = led[p + 10 j]``) delayed by the coarse ``lag``, and

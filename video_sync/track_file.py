@@ -8,9 +8,9 @@ A track file holds one row per video frame and the columns ``frame, time``, then
 ``<name>_x_px, <name>_y_px, <name>_x, <name>_y, <name>_valid`` (pixels, metres, 0/1), then
 ``led, led_quality``. Its side file ``<track>.json`` (format ``panto-video-track``, version 1)
 holds the video, the frame rate, the marker names, the tracker set-up, the lost-frame counts and
-the LED threshold and separation. :func:`video_sync.tracking.track_video` makes a
+the LED threshold and separation. :func:`panto.video_sync.tracking.track_video` makes a
 :class:`TrackResult`; :meth:`TrackResult.to_csv` and :meth:`TrackResult.from_csv` write and read
-the pair. Every name here is also importable from :mod:`video_sync.tracking`.
+the pair. Every name here is also importable from :mod:`panto.video_sync.tracking`.
 """
 from __future__ import annotations
 
@@ -199,7 +199,7 @@ class MarkerTrack:
 
 @dataclass(frozen=True)
 class TrackResult:
-    """What :func:`video_sync.tracking.track_video` found, frame by frame.
+    """What :func:`panto.video_sync.tracking.track_video` found, frame by frame.
 
     Attributes
     ----------

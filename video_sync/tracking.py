@@ -54,9 +54,9 @@ from typing import Callable
 import numpy as np
 from scipy import ndimage
 
-from video_sync.track_file import (SETUP_FORMAT, TRACK_FORMAT, LedSetup, MarkerSetup, MarkerTrack,
+from panto.video_sync.track_file import (SETUP_FORMAT, TRACK_FORMAT, LedSetup, MarkerSetup, MarkerTrack,
                                    SetupError, TrackerSetup, TrackResult)
-from video_sync.video_io import FrameView, Segment, read_frame_views, split_at_keyframes
+from panto.video_sync.video_io import FrameView, Segment, read_frame_views, split_at_keyframes
 
 __all__ = ["SETUP_FORMAT", "TRACK_FORMAT", "Detection", "LedSetup", "MarkerSetup", "MarkerTrack",
            "MarkerTracker", "SetupError", "TrackResult", "TrackerSetup", "classify_led",
@@ -366,7 +366,7 @@ def track_video(path: str | Path, setup: TrackerSetup, *, workers: int | None = 
                 progress: Callable[[str], None] | None = None) -> TrackResult:
     """Track every marker of `setup` and read the LED in every frame of a video (streaming).
 
-    The video is cut at keyframes into segments (:func:`video_sync.video_io.split_at_keyframes`,
+    The video is cut at keyframes into segments (:func:`panto.video_sync.video_io.split_at_keyframes`,
     about four per worker, so a busy core does not hold up the rest), the segments are tracked in
     parallel and joined in order. The result equals a serial pass (see the module notes).
 
@@ -381,7 +381,7 @@ def track_video(path: str | Path, setup: TrackerSetup, *, workers: int | None = 
     executor : concurrent.futures.Executor, optional
         Runs the segments instead of a local process pool (e.g. a Dask client's executor).
     threads : bool or str
-        FFmpeg's decoder threads (see :func:`video_sync.video_io.read_frame_views`).
+        FFmpeg's decoder threads (see :func:`panto.video_sync.video_io.read_frame_views`).
     progress : callable, optional
         Receives a line every 500 frames (serial) or per finished segment (parallel).
 

@@ -391,7 +391,7 @@ class VideoWriter:
         Largest time between two keyframes (IDR frames) [s]; default 1 s (50 frames at 50
         frames/s, libx264's own default is 250). Every keyframe starts a group of pictures that
         decodes on its own, so a reader can split the file there and decode the parts in parallel
-        (:func:`video_sync.tracking.track_video`); the cost is a slightly larger file.
+        (:func:`panto.video_sync.tracking.track_video`); the cost is a slightly larger file.
 
     Examples
     --------

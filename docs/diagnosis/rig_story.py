@@ -45,12 +45,12 @@ BAR_MASS, HINGE_FRICTION = 1.5, 20.0
 def record(folder: Path, profile_name: str, seed: int, duration: float, *, effects: bool = True):
     """A virtual run with the bar and the hinge friction on (`effects`) or a clean rig (the same
     inputs and noise: the twin), as the diagnosis sees it (truth removed, 50 Hz)."""
-    from build_fmu.project import project_fmu
-    from identification.diagnosis_benchmark import blind_data
-    from rig.dataset import read_dataset
-    from rig.imperfections import RigImperfections
-    from rig.profiles import load_profile
-    from rig.virtual import run_virtual_profile
+    from panto.build_fmu.project import project_fmu
+    from panto.identification.diagnosis.benchmark import blind_data
+    from panto.rig.dataset import read_dataset
+    from panto.rig.imperfections import RigImperfections
+    from panto.rig.profiles import load_profile
+    from panto.rig.virtual import run_virtual_profile
 
     base = load_profile(ROOT / "rig" / "profiles" / f"{profile_name}.json")
     profile = dataclasses.replace(base, duration=duration, seed=base.seed + seed)
@@ -66,7 +66,7 @@ def locate(data, residual: np.ndarray) -> dict[str, float]:
     """Where the force residual lies: high band, strong acceleration, slow motion."""
     from scipy import signal as sps
 
-    from identification.rigid_body import motion
+    from panto.identification.structures.rigid_body import motion
 
     dt = data.sample_period
     velocity, acceleration = motion(data.input("eta"), dt, 0.4)[:2]
@@ -85,8 +85,8 @@ def locate(data, residual: np.ndarray) -> dict[str, float]:
 def final_model(data, result) -> Any:
     """The diagnosis' final model rebuilt from its accepted effects (their parameter names carry
     the input or output they act on), to simulate other runs."""
-    from identification.augmentations import AugmentedStructure
-    from identification.diagnosis_support import build_structure, default_roles
+    from panto.identification.diagnosis.augmentations import AugmentedStructure
+    from panto.identification.diagnosis.support import build_structure, default_roles
 
     structure = build_structure(result.structure, data, {})[0]
     roles = default_roles(structure, data)
@@ -108,9 +108,9 @@ def force_residual(structure, parameters, data) -> np.ndarray:
 def tell_story(duration: float = 40.0, ramps_duration: float = 60.0, *, max_effects: int = 3,
                progress: Callable[[str], None] | None = None) -> dict[str, Any]:
     """Record the runs, diagnose, and measure where, which and how far (module notes)."""
-    from identification.base import fit_percent
-    from identification.diagnosis import diagnose, fit_nominal
-    from identification.diagnosis_support import build_structure
+    from panto.identification.estimation.base import fit_percent
+    from panto.identification.diagnosis.pipeline import diagnose, fit_nominal
+    from panto.identification.diagnosis.support import build_structure
 
     say = progress or (lambda line: None)
     with tempfile.TemporaryDirectory() as root:

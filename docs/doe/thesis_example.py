@@ -15,10 +15,10 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from identification.doe_example import run_thesis_example
-from identification.doe_plots import plot_line_designs, plot_thesis_example
-from identification.input_design import GeneticOptions
-from identification.online_design import OnlineOptions
+from panto.identification.design.thesis_example import run_thesis_example
+from panto.identification.design.plots import plot_line_designs, plot_thesis_example
+from panto.identification.design.input_design import GeneticOptions
+from panto.identification.design.online_design import OnlineOptions
 
 
 def main(argv: list[str] | None = None) -> list[Path]:

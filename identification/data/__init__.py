@@ -1,0 +1,1 @@
+"""Data for identification: recorded runs and plain tables to IdentificationData, preprocessing."""

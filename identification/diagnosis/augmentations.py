@@ -1,0 +1,471 @@
+"""Candidate effects as physically meaningful augmentations of a nominal model (issue 8, question 2).
+
+:class:`AugmentedStructure` ``(nominal, effect, roles, setting)`` is a :class:`ModelStructure`
+whose parameters are the nominal's plus the effect's own; it is refitted by output error (free
+run) with the nominal parameters free too. Three kinds of augmentation:
+
+Input side (the inputs are transformed before the nominal simulates them)
+    ``input_delay``  ``u(t - d)``, fractional ``d`` [s] by linear interpolation, ``u(0)`` held;
+    ``actuator_lag`` ``T w' + w = u``, exact first-order filter ``a = exp(-T_s / T)``;
+    ``dead_zone``    ``c + sign(u - c) max(|u - c| - b, 0)`` about the training median ``c``;
+    ``saturation``   ``clip(s, s_low, s_high)`` of an input (or of the force output).
+Output side (added to one output, the *target*)
+    ``offset``         ``y + c``;
+    ``sensor_inertia`` ``F - m_s a``: a mass ``m_s`` between the structure and the force sensor
+                       (the rig's aluminium bar: ``F_sensor = F_c - m_bar a_bar``), ``a`` the
+                       acceleration of the sensor's side (``roles.sensor_position``, the bar's
+                       ``eta``; :func:`~panto.identification.diagnosis.effects.sensor_acceleration`);
+    ``extra_mode``     ``y + g (H - 1) w~``, ``H = w_0^2 / (s^2 + 2 zeta w_0 s + w_0^2)`` (Tustin)
+                       an unmodelled compliant mode (support resonance) driven by ``w``
+                       (gain ``g``, frequency ``f_0`` [Hz], damping ``zeta``).
+Inside the dynamics
+    the nominal's own parameters when it has them: the nonlinear pantograph (``physical``):
+    ``coulomb_friction -> T_f`` (hinge friction torque), ``cubic_stiffness -> k_c3`` (head
+    suspension), ``contact_loss -> unilateral_contact = 1`` (a switch: no new parameter);
+    the linearised pantograph (``physical-linear``) and the two-/three-mass oscillators: their
+    carbon contact made unilateral, a switched pair of linear models in contact and in flight
+    (:mod:`panto.identification.diagnosis.unilateral_contact`; no new parameter);
+    an effect acting where an input acts, as that input's equivalent (:data:`EQUIVALENT_INPUTS`:
+    the linearised pantograph's hinge friction as a pressure: Coulomb's set-valued law
+    stepped with the linear model, :func:`stick_slip_run`, so the joint sticks while the
+    friction can hold it; other nominals ``p + c tanh(v / v_s)`` from a first pass);
+    a nominal with ``with_effect`` (the linear OE model: a feedback term ``c phi(y)`` as an extra
+    input of its dynamics; the rigid body: ``F_c tanh(q'/v_s)``);
+    otherwise a quasi-static additive term on the force (or target) output:
+    ``F_f tanh(v / v_s)`` (friction), ``k_3 x~^3`` (stiffening), ``max(F, 0)`` (contact loss),
+    which is what these effects do to a position-driven system at low frequency.
+
+Start values come from the FROLS ranking (:mod:`panto.identification.diagnosis.effects`): the variant's setting
+(delay, time constant, width, frequency) and its least-squares coefficient (``setting
+["coefficient"]``); the target output is ``setting["output"]``.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any, Mapping
+
+import numpy as np
+from scipy import signal as sps
+
+from panto.identification.estimation.base import IdentificationData, IdentificationError, ModelStructure
+from panto.identification.diagnosis.effects import (EFFECTS, SignalRoles, play_operator, sensor_acceleration,
+                                    sensor_signal)
+from panto.identification.structures.rigid_body import motion
+
+INPUT_SIDE = ("input_delay", "actuator_lag", "dead_zone", "saturation")
+OUTPUT_SIDE = ("offset", "sensor_inertia", "extra_mode")
+INSIDE = ("coulomb_friction", "cubic_stiffness", "contact_loss")
+#: Effects the nominal structures of this project carry as their own parameters.
+NATIVE_PARAMETERS = {"physical": {"coulomb_friction": "T_f", "cubic_stiffness": "k_c3"}}
+#: Native switches (a fixed model parameter set to 1; no new parameter).
+NATIVE_SWITCHES = {"physical": {"contact_loss": "unilateral_contact"}}
+#: Effects that act where an input acts (an *equivalent input*): the pantograph's hinge friction
+#: torque ``T_f tanh(phi1'/w)`` acts on the lower arm ``phi1`` exactly where the bellow torque
+#: ``k_p p`` does (thesis eq. 2.23, generalised force on ``phi1``), so in the linearised model it is
+#: the pressure ``p + c tanh(v / v_s)`` with ``c = -T_f / k_p`` [bar] (``v`` the collector bar's
+#: velocity, the sign of ``phi1'``): friction inside the dynamics, reaching both outputs.
+EQUIVALENT_INPUTS = {"physical-linear": {"coulomb_friction": "p"}}
+_DERIVATIVE_CUTOFF = 0.4
+
+
+def _native(nominal: ModelStructure, effect: str) -> str | None:
+    return NATIVE_PARAMETERS.get(nominal.name, {}).get(effect)
+
+
+def _switch(nominal: ModelStructure, effect: str) -> str | None:
+    return NATIVE_SWITCHES.get(nominal.name, {}).get(effect)
+
+
+def _unilateral(nominal: ModelStructure) -> ModelStructure | None:
+    """``contact_loss`` inside a linear(ised) pantograph: its carbon contact made unilateral, a
+    switched linear model (:class:`panto.identification.diagnosis.unilateral_contact.UnilateralContact`), or None
+    when `nominal` has no such linear contact element. An augmented nominal whose effect acts
+    outside the dynamics (input or output side, equivalent input) is rebuilt around the
+    unilateral form of its inner structure: the head's flight is a property of the dynamics, which
+    the other effects act on from outside."""
+    from panto.identification.diagnosis.unilateral_contact import UnilateralContact, supports_unilateral
+
+    if isinstance(nominal, AugmentedStructure):
+        if nominal.mode not in ("wrapper", "equivalent"):
+            return None
+        inner = _unilateral(nominal.nominal_structure)
+        return None if inner is None else AugmentedStructure(inner, nominal.effect, nominal.roles,
+                                                             nominal.setting)
+    return UnilateralContact(nominal) if supports_unilateral(nominal) else None
+
+
+def equivalent_input(nominal: ModelStructure, effect: str) -> str | None:
+    """The input through which `effect` acts in `nominal` (:data:`EQUIVALENT_INPUTS`), or None;
+    an augmented nominal answers for its innermost structure."""
+    name = EQUIVALENT_INPUTS.get(str(nominal.name).split("+")[0], {}).get(effect)
+    return name if name in nominal.input_names else None
+
+
+def _has_inside_form(nominal: ModelStructure, effect: str) -> bool:
+    if isinstance(nominal, AugmentedStructure):
+        return nominal.supports_inside(effect)
+    if not hasattr(nominal, "with_effect"):
+        return False
+    try:
+        nominal.with_effect(effect, {"output": nominal.output_names[0],
+                                     "drive": (nominal.input_names or ("",))[0]})
+    except IdentificationError:
+        return False
+    return True
+
+
+class AugmentedStructure(ModelStructure):
+    """The nominal structure with one candidate effect added (module notes).
+
+    Parameters
+    ----------
+    nominal : ModelStructure
+        Possibly itself augmented (effects accumulate).
+    effect : str
+        One of :data:`panto.identification.diagnosis.effects.EFFECTS`.
+    roles : SignalRoles
+        Which signals are position, force, actuators.
+    setting : mapping
+        ``output`` (target output), ``signal``/``input`` (the transformed input), ``drive``,
+        ``v_s``, ``delay_s``, ``time_constant_s``, ``width``, ``low``/``high``,
+        ``frequency_hz``, ``damping``, ``coefficient`` (ranking), ``centre``, ``scale`` (typical
+        magnitude of the target output) ...
+    """
+
+    def __init__(self, nominal: ModelStructure, effect: str, roles: SignalRoles,
+                 setting: Mapping[str, Any]) -> None:
+        if effect not in EFFECTS:
+            raise IdentificationError(f"unknown effect {effect!r}; the vocabulary is {EFFECTS}")
+        self.nominal_structure, self.effect, self.roles = nominal, effect, roles
+        self.setting = dict(setting)
+        self.setting.setdefault("output", nominal.output_names[0])
+        self.name = f"{nominal.name}+{effect}"
+        self.input_names, self.output_names = nominal.input_names, nominal.output_names
+        self.base, self.mode = nominal, "wrapper"
+        self._starts: dict[str, float] = {}
+        self._bounds: dict[str, tuple[float, float]] = {}
+        self.difference_step = getattr(nominal, "difference_step", 1e-6)
+        if effect in INSIDE and _switch(nominal, effect):
+            self._build_switch(nominal, _switch(nominal, effect))
+        elif effect in INSIDE and _native(nominal, effect):
+            self.mode = "native"
+            name = _native(nominal, effect)
+            self._starts[name] = float(self.setting.get("native_start", nominal.nominal()[name]))
+        elif effect in INSIDE and equivalent_input(nominal, effect):
+            self.mode = "equivalent"
+            name = f"{effect}:{equivalent_input(nominal, effect)}"
+            start = float(self.setting.get("coefficient", 0.0) or 0.0)
+            size = float(self.setting.get("input_scale", 1.0) or 1.0)
+            self._add(name, start, (-max(100 * abs(start), 10 * size),
+                                    max(100 * abs(start), 10 * size)))
+            width = float(self.setting.get("presliding", 0.0) or 0.0)
+            if width > 0 and _state_space(nominal) is None:  # the set-valued law sticks itself
+                self._add(f"{effect}:presliding", width, (0.05 * width, 20.0 * width))
+        elif effect == "contact_loss" and (unilateral := _unilateral(nominal)) is not None:
+            self.mode, self.base = "inside", unilateral
+        elif effect in INSIDE + ("offset",) and _has_inside_form(nominal, effect):
+            self.mode = "inside"
+            self.base = nominal.with_effect(effect, self.setting)
+        else:
+            self._build_wrapper()
+        if self.mode == "inside":
+            self.effect_parameters = tuple(n for n in self.base.parameter_names
+                                           if n not in nominal.parameter_names)
+        else:
+            self.effect_parameters = tuple(self._starts)
+        self.parameter_names = tuple(self.base.parameter_names) + tuple(
+            n for n in self._starts if n not in self.base.parameter_names)
+
+    # --- construction -------------------------------------------------------------------
+    def _build_switch(self, nominal: ModelStructure, switch: str) -> None:
+        fixed = dict(getattr(nominal, "fixed", {})) | {switch: 1.0}
+        options = {"outputs": nominal.output_names, "fixed": fixed}
+        if hasattr(nominal, "fmu_path"):
+            options["fmu_path"] = nominal.fmu_path
+        self.base, self.mode = type(nominal)(**options), "switch"
+
+    def supports_inside(self, effect: str) -> bool:
+        """Whether `effect` can still go inside the dynamics of this (augmented) model."""
+        return _has_inside_form(self.nominal_structure, effect) and self.mode != "switch"
+
+    def with_effect(self, effect: str, setting: Mapping[str, Any]) -> ModelStructure:
+        """Push an inside effect down to the innermost model that takes it (keeps this one)."""
+        if self.mode == "inside":
+            return AugmentedStructure(self.nominal_structure.with_effect(effect, setting),
+                                      self.effect, self.roles, self.setting)
+        inner = self.nominal_structure
+        if not _has_inside_form(inner, effect):
+            raise IdentificationError(f"{self.name}: no inside form for {effect!r}")
+        return AugmentedStructure(inner.with_effect(effect, setting), self.effect, self.roles,
+                                  self.setting)
+
+    def _build_wrapper(self) -> None:
+        s, effect = self.setting, self.effect
+        coefficient = float(s.get("coefficient", 0.0) or 0.0)
+        scale = float(s.get("scale", 1.0) or 1.0)
+        wide = lambda start, size: (-max(100 * abs(start), 100 * size), max(100 * abs(start), 100 * size))
+        if effect == "input_delay":
+            name = f"input_delay:{self._input()}"
+            self._add(name, float(s.get("delay_s", 0.01)), (0.0, float(s.get("max_delay_s", 1.0))))
+        elif effect == "actuator_lag":
+            name = f"actuator_lag:{self._input()}"
+            self._add(name, float(s.get("time_constant_s", 0.05)),
+                      (0.0, 100.0 * float(s.get("time_constant_s", 0.05))))
+        elif effect == "dead_zone":
+            width = float(s.get("width", s.get("half_width", 0.0)))
+            self._add(f"dead_zone:{self._input()}", width, (0.0, 10.0 * max(width, 1e-9)))
+        elif effect == "saturation":
+            signal = s.get("signal", self._input())
+            low, high = float(s.get("low", -1.0)), float(s.get("high", 1.0))
+            margin = 10.0 * max(high - low, 1e-9)
+            self._add(f"saturation:{signal}:low", low, (low - margin, high))
+            self._add(f"saturation:{signal}:high", high, (low, high + margin))
+        elif effect == "offset":
+            self._add(f"offset:{s['output']}", coefficient, wide(coefficient, scale))
+        elif effect == "sensor_inertia":
+            self._add(f"sensor_inertia:{self._force()}", -coefficient,
+                      wide(coefficient, scale / max(float(s.get("acceleration_scale", 1.0)), 1e-12)))
+        elif effect == "extra_mode":
+            f0, nyquist = float(s.get("frequency_hz", 1.0)), float(s.get("nyquist", 1e9))
+            self._add("extra_mode:gain", coefficient or 0.01 * scale, wide(coefficient, scale))
+            self._add("extra_mode:frequency", f0, (f0 / 3.0, min(3.0 * f0, 0.95 * nyquist)))
+            self._add("extra_mode:damping", float(s.get("damping", 0.05)), (1e-3, 1.0))
+        elif effect == "coulomb_friction":
+            self._add(f"coulomb_friction:{self._force()}", coefficient, wide(coefficient, scale))
+        elif effect == "cubic_stiffness":
+            self._add(f"cubic_stiffness:{s['output']}", coefficient,
+                      wide(coefficient, scale / max(float(s.get("position_scale", 1.0)) ** 3, 1e-30)))
+        elif effect == "contact_loss":
+            pass  # a clip of the force output: no parameter
+        else:  # pragma: no cover - the vocabulary is closed
+            raise IdentificationError(f"no augmentation for {effect!r}")
+
+    def _add(self, name: str, start: float, bounds: tuple[float, float]) -> None:
+        low, high = float(bounds[0]), float(bounds[1])
+        if not low < high:
+            low, high = low - 1.0, high + 1.0
+        self._starts[name] = float(min(max(start, low), high))
+        self._bounds[name] = (low, high)
+
+    def _input(self) -> str:
+        name = self.setting.get("input") or self.setting.get("signal")
+        if name in self.input_names:
+            return str(name)
+        actuators = [a for a in self.roles.actuators if a in self.input_names]
+        return (actuators or list(self.input_names))[0]
+
+    def _force(self) -> str:
+        force = self.roles.force
+        return force if force in self.output_names else str(self.setting["output"])
+
+    # --- ModelStructure ------------------------------------------------------------------
+    def nominal(self) -> dict[str, float]:
+        values = dict(self.base.nominal())
+        values.update(self._starts)
+        return values
+
+    def bounds(self) -> dict[str, tuple[float, float]]:
+        values = dict(self.base.bounds())
+        values.update(self._bounds)
+        return values
+
+    def simulate(self, parameters: Mapping[str, float], data: IdentificationData) -> np.ndarray:
+        own = {k: float(v) for k, v in parameters.items() if k in self._bounds}
+        inner = {k: v for k, v in parameters.items() if k not in self._bounds}
+        values = {**self._starts, **own}
+        if self.mode == "native":
+            return self.base.simulate({**self._starts, **inner}, data)
+        if self.mode in ("inside", "switch"):
+            return self.base.simulate(inner, data)
+        if self.mode == "equivalent":
+            return self._simulate_equivalent(values, inner, data)
+        if self.effect in INPUT_SIDE and not self._on_output():
+            data = self._transform_inputs(values, data)
+            return self.base.simulate(inner, data)
+        y = np.array(self.base.simulate(inner, data), float)
+        return self._transform_outputs(values, data, y)
+
+    def _on_output(self) -> bool:
+        return self.effect == "saturation" and self.setting.get("signal") in self.output_names \
+            and self.setting.get("signal") not in self.input_names
+
+    def _simulate_equivalent(self, values: Mapping[str, float], inner: Mapping[str, float],
+                             data: IdentificationData) -> np.ndarray:
+        """Two passes: the velocity of the position role from the free run without the effect,
+        then the free run with the equivalent input ``u + c tanh(v / v_s)``, or, for a joint that
+        sticks, ``u + c (x - play_b(x)) / b`` (elasto-plastic friction, ``b`` fitted; a first-order
+        correction of the feedback: the effect barely moves the reversals)."""
+        name = equivalent_input(self.nominal_structure, self.effect)
+        level = abs(values[f"{self.effect}:{name}"])
+        if _state_space(self.base) is not None:  # a presliding width given is not its own
+            inner = {k: v for k, v in inner.items() if not k.startswith(f"{self.effect}:")}
+            return _through_wrappers(self.base, inner, data, lambda structure, parameters, run:
+                                     stick_slip_run(structure, parameters, run, name, level))
+        first = np.asarray(self.base.simulate(inner, data), float)
+        if f"{self.effect}:presliding" in values:
+            x = self._signal(self.roles.position, data, first)
+            b = values[f"{self.effect}:presliding"]
+            shape = (x - play_operator(x, b)) / b
+        else:
+            velocity = self._motion(data, first)[0]
+            width = float(self.setting.get("v_s", 0.0))
+            shape = np.tanh(velocity / width) if width > 0 else np.sign(velocity)
+        inputs = np.array(data.inputs, float)
+        inputs[:, data.input_names.index(name)] += values[f"{self.effect}:{name}"] * shape
+        return self.base.simulate(inner, dataclasses.replace(data, inputs=inputs))
+
+    # --- transforms -----------------------------------------------------------------------
+    def _transform_inputs(self, values: Mapping[str, float], data: IdentificationData
+                          ) -> IdentificationData:
+        name = self._input()
+        index = data.input_names.index(name)
+        u = np.array(data.inputs[:, index], float)
+        if self.effect == "input_delay":
+            d = values[f"input_delay:{name}"]
+            u = np.interp(data.time - d, data.time, u)
+        elif self.effect == "actuator_lag":
+            lag = values[f"actuator_lag:{name}"]
+            if lag > 1e-6 * data.sample_period:
+                a = math.exp(-data.sample_period / lag)
+                u = sps.lfilter([1 - a], [1, -a], u, zi=[a * u[0]])[0]
+        elif self.effect == "dead_zone":
+            width, centre = values[f"dead_zone:{name}"], float(self.setting.get("centre", 0.0))
+            shifted = u - centre
+            u = centre + np.sign(shifted) * np.maximum(np.abs(shifted) - width, 0.0)
+        elif self.effect == "saturation":
+            u = np.clip(u, values[f"saturation:{name}:low"], values[f"saturation:{name}:high"])
+        inputs = np.array(data.inputs, float)
+        inputs[:, index] = u
+        return dataclasses.replace(data, inputs=inputs)
+
+    def _signal(self, name: str | None, data: IdentificationData, y: np.ndarray) -> np.ndarray:
+        if name in data.input_names:
+            return np.asarray(data.input(name), float)
+        if name in self.output_names:
+            return y[:, self.output_names.index(name)]
+        raise IdentificationError(f"{self.name}: signal role {name!r} is neither an input nor a "
+                                  f"simulated output ({data.input_names}, {self.output_names})")
+
+    def _motion(self, data: IdentificationData, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        position = self._signal(self.roles.position, data, y)
+        return motion(position, data.sample_period, _DERIVATIVE_CUTOFF)
+
+    def _transform_outputs(self, values: Mapping[str, float], data: IdentificationData,
+                           y: np.ndarray) -> np.ndarray:
+        s, effect = self.setting, self.effect
+        target = self.output_names.index(self._force() if effect in
+                                         ("sensor_inertia", "coulomb_friction", "contact_loss")
+                                         else s["output"])
+        if effect == "offset":
+            y[:, target] += values[f"offset:{s['output']}"]
+        elif effect == "sensor_inertia":
+            sensor = sensor_signal(self.roles, tuple(data.input_names) + tuple(self.output_names))
+            acceleration = sensor_acceleration(self._signal(sensor, data, y), data.sample_period)
+            y[:, target] -= values[f"sensor_inertia:{self._force()}"] * acceleration
+        elif effect == "extra_mode":
+            drive = self._signal(s.get("drive") or self._input(), data, y)
+            y[:, target] += values["extra_mode:gain"] * mode_response(
+                drive - drive[0], values["extra_mode:frequency"], values["extra_mode:damping"],
+                data.sample_period)
+        elif effect == "coulomb_friction":
+            velocity = self._motion(data, y)[0]
+            width = float(s.get("v_s", 0.0))
+            shape = np.tanh(velocity / width) if width > 0 else np.sign(velocity)
+            y[:, target] += values[f"coulomb_friction:{self._force()}"] * shape
+        elif effect == "cubic_stiffness":
+            x = self._signal(self.roles.position, data, y) - float(s.get("centre", 0.0))
+            y[:, target] += values[f"cubic_stiffness:{s['output']}"] * x ** 3
+        elif effect == "contact_loss":
+            y[:, target] = np.maximum(y[:, target], 0.0)
+        elif effect == "saturation":
+            signal = s["signal"]
+            y[:, target] = np.clip(y[:, target], values[f"saturation:{signal}:low"],
+                                   values[f"saturation:{signal}:high"])
+        return y
+
+
+def _state_space(structure: ModelStructure) -> ModelStructure | None:
+    """The linear state-space nominal (``linear_model``, ``model_inputs``: the linearised
+    pantograph) under input- and output-side wrappers, or None."""
+    while isinstance(structure, AugmentedStructure):
+        if structure.mode != "wrapper":
+            return None
+        structure = structure.base
+    return structure if hasattr(structure, "linear_model") and \
+        hasattr(structure, "model_inputs") else None
+
+
+def _through_wrappers(structure: ModelStructure, parameters: Mapping[str, float],
+                      data: IdentificationData, core) -> np.ndarray:
+    """Simulate `structure` with ``core(innermost, parameters, data)`` in place of its innermost
+    nominal's free run; the wrappers' input and output transforms applied around it."""
+    if not isinstance(structure, AugmentedStructure):
+        return np.asarray(core(structure, parameters, data), float)
+    own = {k: float(v) for k, v in parameters.items() if k in structure._bounds}
+    inner = {k: v for k, v in parameters.items() if k not in structure._bounds}
+    values = {**structure._starts, **own}
+    if structure.effect in INPUT_SIDE and not structure._on_output():
+        return _through_wrappers(structure.base, inner,
+                                 structure._transform_inputs(values, data), core)
+    y = np.array(_through_wrappers(structure.base, inner, data, core), float)
+    return structure._transform_outputs(values, data, y)
+
+
+def stick_slip_run(structure: Any, parameters: Mapping[str, float], data: IdentificationData,
+                   input_name: str, level: float) -> np.ndarray:
+    """Free run of a linearised mechanism with Coulomb friction ``|f| <= level`` on its first
+    coordinate (the pantograph's lower-arm hinge ``phi1``), in units of the input `input_name`
+    whose generalised force acts on that coordinate (the bellow pressure: ``T_f / k_p`` [bar]).
+
+    Coulomb's set-valued law stepped with the exact discretisation of the model
+    (``x[k+1] = Phi x[k] + drive[k] + Gamma_a f[k]``, the friction held over the step; Moreau's
+    time stepping, Acary & Brogliato, *Numerical Methods for Nonsmooth Dynamical Systems*, 2008,
+    ch. 10): the friction that would stop the joint at the end of the step,
+    ``f* = -v_free / (Gamma_a)_v``, is applied when ``|f*| <= level`` (the joint sticks), else
+    ``level sign(f*)`` (it slides against its motion). The two-pass form ``c tanh(v / v_s)`` on
+    the friction-free velocity does not know when the joint sticks. Measured on the virtual test
+    bed (20 N m hinge, 40 s APRBS runs at 50 Hz, nominal refitted with the effect): the withheld
+    run's force fit goes from 89.2 % to 93.4 % with the two-pass form and to 96.1 % with this law
+    (fitted 0.066 bar, truth 20 / 260 = 0.077 bar); the clean rig gives 98.7 %, the nonlinear
+    model with the true torque 97.8 % (the rest is the linearisation)."""
+    model = structure.discrete_model(parameters, data)
+    column = model.gamma0[:, list(structure.input_names).index(input_name)]
+    joint = len(model.x_start) // 2  # states (q, q'): the velocity of the first coordinate
+    gain = float(column[joint])
+    x = model.x_start
+    states = np.empty((len(model.du), len(x)))
+    states[0] = x
+    with np.errstate(over="ignore", invalid="ignore"):
+        for k in range(len(model.drive)):
+            free = model.phi @ x + model.drive[k]
+            f = -free[joint] / gain if gain != 0.0 else 0.0
+            x = free + column * min(level, max(-level, f))
+            states[k + 1] = x
+    return model.outputs(states, f"{structure.name} with friction")
+
+
+def mode_response(w: np.ndarray, frequency: float, damping: float, sample_period: float) -> np.ndarray:
+    """``(H - 1) w`` of the second-order mode ``H = w0^2 / (s^2 + 2 zeta w0 s + w0^2)``
+    (Tustin), from rest: the dynamic part only (zero static gain)."""
+    if not (frequency > 0 and damping > 0) or frequency >= 0.5 / sample_period:
+        raise IdentificationError(f"extra mode: frequency {frequency} Hz / damping {damping} "
+                                  "inadmissible")
+    omega = 2 * np.pi * frequency
+    b, a = sps.bilinear([omega ** 2], [1, 2 * damping * omega, omega ** 2], 1 / sample_period)
+    return sps.lfilter(b, a, w) - w
+
+
+def describe_augmentation(structure: AugmentedStructure) -> str:
+    """One line: the effect, how it enters and its parameters."""
+    where = {"native": "the nominal's own parameter", "switch": "a model switch",
+             "equivalent": "inside the dynamics, as an equivalent input",
+             "inside": "inside the dynamics", "wrapper": "input side" if structure.effect in
+             INPUT_SIDE else "output side"}[structure.mode]
+    return (f"{structure.effect} ({where}; parameters "
+            f"{', '.join(structure.effect_parameters) or 'none'})")
+
+
+__all__ = ["AugmentedStructure", "mode_response", "describe_augmentation", "INPUT_SIDE",
+           "OUTPUT_SIDE", "INSIDE", "NATIVE_PARAMETERS", "NATIVE_SWITCHES", "EQUIVALENT_INPUTS",
+           "equivalent_input", "stick_slip_run"]

@@ -1,0 +1,538 @@
+"""Sim-to-real gap diagnosis: where the model and the measurement disagree, which unmodelled effect
+causes it, and how far the gap shrinks once that effect is in the model (issue 8).
+
+:func:`diagnose` ``(train, validation, structure=...)``:
+
+1. **Nominal.** Fit the nominal structure on the training run (output error, free run,
+   :func:`~panto.identification.estimation.least_squares.fit_least_squares`).
+2. **Where.** :func:`~panto.identification.diagnosis.residual_analysis.analyse_residuals` on the validation free-run
+   residual (fit, band and segment energy, whiteness, input cross-correlation, error model,
+   even/odd nonlinearity, conditions). The gap is tested on that residual less what one joint
+   local retuning of the nominal's free parameters on the validation run would remove (their
+   sensitivities projected out: the training fit's estimation error is not a gap), and a gap
+   too when that retuning disagrees with the training estimate (``chi2`` of the retuning against
+   the two runs' parameter covariances at 1 %); the nominal's settling time is left out at the
+   start (a record that does not start at rest); a residual whose offset or gain on the
+   prediction drifts over the record is a gap too (``drift_test``). A test counts only for an output whose
+   residual's systematic part costs at least ``RELEVANCE`` = 2 fit points (engineering
+   relevance, :data:`~panto.identification.diagnosis.support.RELEVANCE`). It is *significant* when,
+   for some output, the
+   residual is correlated with an input, with a power signal (nonlinearity tests), or its mean
+   differs from zero, each at 1 % after a Bonferroni correction over the lags and signals tested,
+   the mean's standard error from the effective sample size ``N_eff = N / (1 + 2 sum r(tau)^2)``.
+   Whiteness alone does not count: a free-run residual may be coloured by coloured measurement
+   noise.
+3. **Which.** Rank the candidates of :data:`~panto.identification.diagnosis.effects.EFFECTS` by FROLS on the
+   *training* residual (the validation run stays withheld), the nominal parameters' sensitivities
+   projected out; refit the top ``max_refits`` significant ones as
+   :class:`~panto.identification.diagnosis.augmentations.AugmentedStructure` (the nominal's parameters free too).
+   An effect is accepted only when (a) ``dBIC < -10``, ``BIC = sum_j N_eff,j ln sigma_j^2 + p ln
+   N_eff`` on the training residuals, ``N_eff`` from the augmented model's residual; (b) its
+   magnitude parameter is significant, ``|theta| / sigma_theta > 3``, ``sigma_theta`` inflated by
+   ``sqrt(N / N_eff)`` for coloured residuals; (c) on the validation run the free-run fit (mean
+   over outputs) improves by more than the spread of the improvement across ``folds`` blocked
+   folds (each fold's share of the whole-run change, times ``folds``; its standard error
+   ``std / sqrt(folds)``), and no output gets worse beyond its own
+   fold standard error (``t_{0.975}`` of it, at least 0.2 points). A model the refit leaves
+   invalid on the validation run (no static equilibrium at its operating point) is rejected.
+   The passing candidate with the largest
+   validation improvement is accepted, unless others come within that improvement's standard
+   error: then the lowest ``dBIC`` among them (parsimony, :func:`_choose`); the search repeats on
+   what remains (``max_effects``).
+4. **How far.** Per accepted effect: the validation fit before and after per output, residual
+   energy per band and segment before and after, the share of residual energy removed, and the
+   effect's parameters with their standard deviations.
+
+Verdict: ``effect`` (the ordered list), ``none`` (no effect accepted and the gap is not significant:
+within the noise) or ``unexplained`` (a significant gap that no candidate closes on withheld data,
+reported with where it lies). No attribution is forced.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable, Mapping, Sequence
+
+import numpy as np
+
+from panto.identification.diagnosis.augmentations import AugmentedStructure, describe_augmentation
+from panto.identification.estimation.base import (IdentificationData, IdentificationError, ModelStructure,
+                                 fit_percent)
+from panto.identification.diagnosis.ranking import rank_candidates
+from panto.identification.diagnosis.support import (NO_GAIN_REASONS, build_structure,
+                                               default_roles, drift_test,
+                                               effective_samples, gap_significance, judge_trial,
+                                               retuning,
+                                               settling_time, systematic_cost, where_summary)
+from panto.identification.diagnosis.effects import EFFECTS, SignalRoles
+from panto.identification.estimation.least_squares import fit_least_squares
+from panto.identification.diagnosis.residual_analysis import OutputAnalysis, analyse_residuals
+from panto.identification.diagnosis.residual_energy import _jsonable
+
+Progress = Callable[[str], None]
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One candidate refitted in one round and how it was judged."""
+
+    effect: str
+    variant: str
+    err: float
+    description: str
+    parameters: Mapping[str, float]
+    std: Mapping[str, float]
+    significance: float
+    delta_bic: float
+    improvement: float
+    fold_improvements: tuple[float, ...]
+    fold_spread: float
+    fit_train: Mapping[str, float]
+    fit_validation: Mapping[str, float]
+    accepted: bool = False
+    failed: tuple[str, ...] = ()
+    message: str = ""
+
+
+@dataclass(frozen=True)
+class Step:
+    """An accepted effect and how far it shrinks the gap on the validation run."""
+
+    effect: str
+    description: str
+    parameters: Mapping[str, float]
+    std: Mapping[str, float]
+    fit_before: Mapping[str, float]
+    fit_after: Mapping[str, float]
+    energy_removed: Mapping[str, float]
+    """Share of the validation residual energy removed, per output."""
+    bands: Mapping[str, Mapping[str, list]]
+    """Per output: band edges [Hz] and residual power before/after per band."""
+    segments: Mapping[str, Mapping[str, list]]
+    """Per output: window start times [s] and residual RMS before/after."""
+
+
+@dataclass(frozen=True, eq=False)
+class Diagnosis:
+    """What :func:`diagnose` found (see the module notes); :meth:`to_dict` is the JSON report."""
+
+    verdict: str
+    effects: tuple[str, ...]
+    structure: str
+    output_names: tuple[str, ...]
+    fit_before: Mapping[str, float]
+    fit_after: Mapping[str, float]
+    fit_train: Mapping[str, float]
+    nominal_parameters: Mapping[str, float]
+    final_parameters: Mapping[str, float]
+    gap: Mapping[str, Any]
+    remaining_gap: Mapping[str, Any]
+    where: Mapping[str, Any]
+    rounds: tuple[Mapping[str, Any], ...]
+    steps: tuple[Step, ...]
+    summary: str
+    wall_time: float
+    analysis_before: tuple[OutputAnalysis, ...] = field(default=(), repr=False)
+    analysis_after: tuple[OutputAnalysis, ...] = field(default=(), repr=False)
+    series: Mapping[str, np.ndarray] = field(default_factory=dict, repr=False)
+
+    def gap_closed(self) -> dict[str, float]:
+        """Per output: share of the validation residual energy removed by all accepted effects."""
+        return {o: 1.0 - ((100 - self.fit_after[o]) / (100 - self.fit_before[o])) ** 2
+                if self.fit_before[o] < 100 else math.nan for o in self.output_names}
+
+    def training_only(self) -> list[dict[str, Any]]:
+        """Effects decisive on training but not confirmed by the withheld run (:func:`_training_only`)."""
+        return _training_only(self.rounds, self.effects)
+
+    def next_experiment(self) -> dict[str, str] | None:
+        """The discrimination experiment (design of experiments, T-optimality) that would best
+        tell whether a suspected effect is there, where such a design exists: Coulomb friction in
+        a pantograph structure (``panto doe --discriminate``; hinge friction ``T_f`` for the
+        physical models, ``F_f1`` for the two-mass oscillator). Suspected: accepted, or refitted
+        and rejected (ranked on the training residual but not confirmed on the withheld data)."""
+        tried = {t["effect"] for r in self.rounds for t in r.get("tried", ())}
+        if "coulomb_friction" not in set(self.effects) | tried:
+            return None
+        design = "F_f1" if self.structure.startswith("two-mass") else \
+            "T_f" if self.structure.startswith("physical") else None
+        if design is None:
+            return None
+        state = "accepted" if "coulomb_friction" in self.effects else "suspected, not confirmed"
+        return {"effect": "coulomb_friction", "status": state, "design": design,
+                "command": f"panto doe --discriminate {design} --parameters PARAMETERS.json "
+                           f"--out doe_{design}",
+                "why": "a rig run designed so that the friction shows in the outputs beyond what "
+                       "re-fitting the nominal can absorb (T-optimal; design of experiments)"}
+
+    def to_dict(self) -> dict:
+        """JSON-ready: verdict, effects, per-output fits, where, rounds, steps, summary."""
+        outputs = {o: {"fit_before": self.fit_before[o], "fit_after": self.fit_after[o],
+                       "fit_train": self.fit_train.get(o), "gap_closed": self.gap_closed()[o]}
+                   for o in self.output_names}
+        return _jsonable({
+            "verdict": self.verdict, "effects": list(self.effects), "structure": self.structure,
+            "outputs": outputs, "fit_before": dict(self.fit_before),
+            "fit_after": dict(self.fit_after), "summary": self.summary,
+            "nominal_parameters": dict(self.nominal_parameters),
+            "final_parameters": dict(self.final_parameters), "gap": dict(self.gap),
+            "remaining_gap": dict(self.remaining_gap), "where": dict(self.where),
+            "rounds": list(self.rounds),
+            "steps": [step.__dict__ for step in self.steps],
+            "analysis": [a.to_dict() for a in self.analysis_before],
+            "next_experiment": self.next_experiment(),
+            "training_only": self.training_only(),
+            "wall_time": self.wall_time})
+
+
+@dataclass
+class _Model:
+    """The current model of the search: structure, parameters, free parameters."""
+
+    structure: ModelStructure
+    parameters: dict[str, float]
+    free: tuple[str, ...]
+    std: dict[str, float] = field(default_factory=dict)
+    covariance: np.ndarray | None = None
+
+
+def diagnose(train: IdentificationData, validation: IdentificationData, *,
+             structure: str | ModelStructure,
+             structure_options: Mapping[str, Any] | None = None,
+             roles: SignalRoles | None = None, candidates: Sequence[str] = EFFECTS,
+             max_effects: int = 3, max_refits: int = 5, executor: Any = None,
+             progress: Progress | None = None, folds: int = 4,
+             max_evaluations: int = 400) -> Diagnosis:
+    """Diagnose the gap between a model structure and data (module notes).
+
+    Parameters
+    ----------
+    train, validation : IdentificationData
+        Same input and output names; the validation run is used only for judging and reporting.
+    structure : str or ModelStructure
+        ``physical``, ``physical-linear``, ``two-mass``, ``three-mass`` (``-friction``),
+        ``linear-N`` (output error of order N), ``rigid-body``, or a structure instance.
+    structure_options : mapping, optional
+        ``free`` (the nominal's free parameters), ``fixed``, and the structure's options
+        (``centre``, ``input_delay`` for ``linear-N``; ``position``, ``cutoff`` for ``rigid-body``).
+    roles : SignalRoles, optional
+        Which signals are position, force and actuators (default from the structure).
+    candidates : sequence of str
+        Effects to consider (a subset of :data:`EFFECTS`).
+    max_effects, max_refits : int
+        Effects accepted at most; candidates refitted per round.
+    executor : concurrent.futures.Executor, optional
+        Parallel Jacobian columns in the refits.
+    progress : callable, optional
+        Receives progress lines.
+    folds : int
+        Blocked folds of the validation run for the improvement's spread.
+    max_evaluations : int
+        Model simulations per least-squares fit.
+    """
+    started = time.perf_counter()
+    say = progress or (lambda line: None)
+    unknown = [c for c in candidates if c not in EFFECTS]
+    if unknown:
+        raise IdentificationError(f"unknown candidate effect(s) {unknown}; the vocabulary is "
+                                  f"{EFFECTS}")
+    if train.input_names != validation.input_names or \
+            train.output_names != validation.output_names:
+        raise IdentificationError(f"training ({train.input_names} -> {train.output_names}) and "
+                                  f"validation ({validation.input_names} -> "
+                                  f"{validation.output_names}) signals differ")
+    options = dict(structure_options or {})
+    nominal, free = build_structure(structure, train, options)
+    roles = roles or default_roles(nominal, train)
+    covered = [c for c in candidates if c in getattr(nominal, "covered_effects", ())]
+    if covered:
+        say(f"diagnose: {nominal.name} already holds {covered}; not candidates")
+        candidates = [c for c in candidates if c not in covered]
+    fit_options = {"executor": executor, "max_evaluations": max_evaluations}
+    say(f"diagnose: nominal {nominal.name}, {len(free)} free parameters, {len(train)} training "
+        f"and {len(validation)} validation samples, outputs {list(train.output_names)}")
+    result = fit_nominal(nominal, free, train, progress=_indent(progress), **fit_options)
+    model = _Model(nominal, dict(result.parameters), tuple(free), dict(result.std),
+                   np.asarray(result.covariance, float))
+    say("diagnose: nominal fit on training: " + _fits(result.fit))
+    before = _simulate(model, validation)
+    analysis_before = _analyse(validation, before, model, roles)
+    gap = _gap(model, validation, before, roles)
+    fit_before = _fit(validation, before)
+    say("diagnose: where: validation fit " + _fits(fit_before) + "; gap " +
+        ("significant: " + "; ".join(gap["reasons"]) if gap["significant"] else "within the noise"))
+    rounds, steps, accepted = [], [], []
+    current = before
+    for round_index in range(max_effects):
+        remaining = [c for c in candidates if c not in accepted]
+        ranking = rank_candidates(model, train, roles, remaining, max_refits)
+        ranking["top"] += _predicted_contact_loss(ranking["top"], remaining, roles, validation,
+                                                  current)
+        say(f"diagnose: round {round_index + 1}: ranked on the training residual: " +
+            (", ".join(f"{c['effect']} (ERR {c['err']:.3f})" for c in ranking["top"]) or
+             "no significant candidate"))
+        trials = [_try(model, c, train, validation, current, roles, folds, fit_options, say)
+                  for c in ranking["top"]]
+        passing = [t for t in trials if t[0].accepted]
+        rounds.append({"ranking": ranking["per_output"], "tried": [t[0].__dict__ for t in trials]})
+        if not passing:
+            say("diagnose: no candidate passes on the withheld data; stop")
+            break
+        trial, new_model, simulated = _choose(passing, folds)
+        steps.append(_step(trial, validation, current, simulated))
+        accepted.append(trial.effect)
+        say(f"diagnose: accepted {trial.effect}: validation fit " + _fits(trial.fit_validation))
+        model, current = new_model, simulated
+    analysis_after = _analyse(validation, current, model, roles) if steps else analysis_before
+    remaining_gap = _gap(model, validation, current, roles) if steps else gap
+    verdict = "effect" if steps else ("unexplained" if gap["significant"] else "none")
+    fit_after = _fit(validation, current)
+    where = where_summary(analysis_before, validation)
+    summary = _summary(verdict, accepted, fit_before, fit_after, where, remaining_gap) + \
+        _training_only_text(_training_only(rounds, accepted))
+    say(f"diagnose: verdict {verdict}: {summary}")
+    return Diagnosis(
+        verdict, tuple(accepted), nominal.name, validation.output_names, fit_before, fit_after,
+        dict(result.fit), dict(result.parameters), dict(model.parameters), gap, remaining_gap,
+        where, tuple(rounds), tuple(steps), summary, time.perf_counter() - started,
+        tuple(analysis_before), tuple(analysis_after),
+        {"time": validation.time, "measured": validation.outputs, "before": before,
+         "after": current})
+
+
+def _indent(progress: Progress | None) -> Progress | None:
+    return None if progress is None else (lambda line: progress("    " + line))
+
+
+def _fits(fits: Mapping[str, float]) -> str:
+    return ", ".join(f"{k} {v:.2f} %" for k, v in fits.items())
+
+
+def fit_nominal(nominal: ModelStructure, free: Sequence[str], train: IdentificationData,
+                **options: Any):
+    """The nominal's output-error fit on the training run, as :func:`diagnose` makes it
+    (`options` go to :func:`~panto.identification.estimation.least_squares.fit_least_squares`)."""
+    return fit_least_squares(nominal, train.select_outputs(_fitted(nominal, train)), free=free,
+                             **options)
+
+
+def _fitted(structure: ModelStructure, data: IdentificationData) -> tuple[str, ...]:
+    missing = [o for o in data.output_names if o not in structure.output_names]
+    if missing:
+        raise IdentificationError(f"{structure.name} does not simulate {missing} "
+                                  f"(it has {list(structure.output_names)})")
+    return data.output_names
+
+
+def _simulate(model: _Model, data: IdentificationData) -> np.ndarray:
+    y = np.asarray(model.structure.simulate(model.parameters, data), float)
+    return y[:, [model.structure.output_names.index(o) for o in data.output_names]]
+
+
+def _fit(data: IdentificationData, simulated: np.ndarray) -> dict[str, float]:
+    return {o: float(fit_percent(data.outputs[:, j], simulated[:, j]))
+            for j, o in enumerate(data.output_names)}
+
+
+def _analyse(data: IdentificationData, simulated: np.ndarray, model: _Model,
+             roles: SignalRoles) -> list[OutputAnalysis]:
+    from panto.identification.structures.rigid_body import motion
+
+    conditions = {n: data.input(n) for n in data.input_names}
+    velocity = None
+    position = roles.position
+    if position in data.input_names:
+        velocity = motion(data.input(position), data.sample_period, 0.4)[0]
+    elif position in data.output_names:
+        velocity = motion(simulated[:, data.output_names.index(position)], data.sample_period,
+                          0.4)[0]
+    orders = (min(20, max(2, len(data) // 50)), min(4, max(1, len(data) // 200)))
+    return analyse_residuals(data.inputs, data.outputs, simulated, data.sample_period,
+                             input_names=data.input_names, output_names=data.output_names,
+                             conditions=conditions, velocity=velocity, error_model_orders=orders)
+
+
+def _gap(model: _Model, data: IdentificationData, simulated: np.ndarray,
+         roles: SignalRoles) -> dict[str, Any]:
+    """The gap's significance on the residual no joint retuning of the model's free parameters
+    explains, and whether that retuning agrees with the training estimate
+    (:func:`~panto.identification.diagnosis.support.retuning`); the nonlinearity tests keep the
+    model's own prediction as their signal. A test counts only where the residual's systematic
+    part costs at least :data:`~panto.identification.diagnosis.support.RELEVANCE` fit points
+    (:func:`~panto.identification.diagnosis.support.systematic_cost`). The model's settling time
+    (:func:`~panto.identification.diagnosis.support.settling_time`) is left out at the start: the free
+    run starts in equilibrium, a record that does not start at rest does not."""
+    from dataclasses import replace
+
+    k = int(round(settling_time(model.structure, model.parameters, data) / data.sample_period))
+    tuning = retuning(model.structure, model.parameters, model.free, data, simulated,
+                      model.covariance, start=k)
+    part = replace(data, time=data.time[k:], inputs=data.inputs[k:], outputs=data.outputs[k:])
+    y = simulated[k:]
+    retuned = replace(part, outputs=part.outputs - (tuning["prediction"][k:] - y))
+    costs = {o: systematic_cost(part.inputs, part.outputs[:, j], y[:, j])
+             for j, o in enumerate(part.output_names)}
+    drift = {o: drift_test(retuned.outputs[:, j] - y[:, j], y[:, j])
+             for j, o in enumerate(part.output_names)}
+    gap = gap_significance(_analyse(retuned, y, model, roles), part, tuning=tuning, costs=costs,
+                           drift=drift)
+    return {**gap, "transient_s": k * data.sample_period}
+
+
+def _try(model: _Model, candidate: Mapping[str, Any], train: IdentificationData,
+         validation: IdentificationData, current: np.ndarray, roles: SignalRoles, folds: int,
+         fit_options: Mapping[str, Any], say: Progress) -> tuple[Trial, _Model, np.ndarray]:
+    """Refit the nominal with one candidate and judge it."""
+    effect = candidate["effect"]
+    stage = "refit failed"
+    try:
+        structure = AugmentedStructure(model.structure, effect, roles, candidate["setting"])
+        free = tuple(model.free) + tuple(p for p in structure.effect_parameters
+                                         if p not in model.free)
+        result, new = _refit(structure, model, train, free, fit_options)
+        stage = "the refitted model is invalid on the validation run"
+        try:
+            simulated = _simulate(new, validation)
+        except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError):
+            # the refit from a distorted nominal may end where the model has no equilibrium at
+            # the validation run's operating point: once more from the structure's defaults
+            result, new = _refit(structure, model, train, free, fit_options, from_defaults=True)
+            simulated = _simulate(new, validation)
+        trial = judge_trial(candidate, structure, result, model, train, validation, current,
+                            simulated, folds)
+    except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError) as error:
+        say(f"  {effect}: rejected: {stage} ({error})")
+        trial = Trial(effect, candidate["variant"], candidate["err"], effect, {}, {}, math.nan,
+                      math.nan, math.nan, (), math.nan, {}, {}, False, (stage,), str(error))
+        return trial, model, current
+    trial = Trial(**{**trial, "description": describe_augmentation(structure)})
+    say(f"  {effect}: dBIC {trial.delta_bic:.1f}, |theta|/sigma {trial.significance:.1f}, "
+        f"validation +{trial.improvement:.2f} points (fold spread {trial.fold_spread:.2f}): "
+        + ("accepted" if trial.accepted else "rejected (" + ", ".join(trial.failed) + ")"))
+    return trial, new, simulated
+
+
+def _predicted_contact_loss(top: Sequence[Mapping[str, Any]], remaining: Sequence[str],
+                            roles: SignalRoles, validation: IdentificationData,
+                            current: np.ndarray) -> list[dict[str, Any]]:
+    """``contact_loss`` as a candidate when the model's own prediction of the contact force on
+    the validation inputs goes below zero (a bilateral contact pulls the head), even when the
+    training run never loses contact and its residual shows no signature. Only the prediction
+    from the inputs is read, not the withheld measurement."""
+    force = roles.force
+    if "contact_loss" not in remaining or any(c["effect"] == "contact_loss" for c in top) or \
+            force not in validation.output_names:
+        return []
+    if not np.nanmin(current[:, validation.output_names.index(force)]) < 0.0:
+        return []
+    return [{"effect": "contact_loss", "variant": "predicted F < 0", "err": 0.0,
+             "significant": False, "output": force, "err_total": 0.0,
+             "setting": {"output": force}}]
+
+
+def _refit(structure: AugmentedStructure, model: _Model, train: IdentificationData,
+           free: tuple[str, ...], fit_options: Mapping[str, Any], from_defaults: bool = False
+           ) -> tuple[Any, _Model]:
+    """The result and the refitted model of an output-error refit from the current parameters
+    (`from_defaults`: the structure's default ones) and the effect's start values; when the start
+    is invalid (an unstable feedback), from the effect scaled towards its neutral value."""
+    starts, bounds = structure.nominal(), structure.bounds()
+    initial = {k: v for k, v in (starts if from_defaults else model.parameters).items()
+               if k in structure.parameter_names and k not in structure.effect_parameters}
+    initial = {k: float(min(max(v, bounds[k][0]), bounds[k][1])) if k in bounds else v
+               for k, v in initial.items()}
+    neutral = [p for p in structure.effect_parameters if bounds[p][0] <= 0.0 <= bounds[p][1]]
+    result = None
+    for factor in (1.0, 0.1, 0.0):
+        scaled = {p: starts[p] * factor for p in neutral}
+        result = fit_least_squares(structure, train, free=free, initial={**initial, **scaled},
+                                   **fit_options)
+        if not result.message.startswith("model invalid"):
+            return result, _Model(structure, dict(result.parameters), free, dict(result.std),
+                                  np.asarray(result.covariance, float))
+    raise IdentificationError(f"{structure.name}: {result.message}")
+
+
+def _choose(passing: Sequence[tuple[Trial, _Model, np.ndarray]], folds: int
+            ) -> tuple[Trial, _Model, np.ndarray]:
+    """The accepted candidate among those passing: the largest validation improvement, unless
+    others come within its standard error over the blocked folds (``spread / sqrt(folds)``);
+    the withheld data cannot tell those apart, so the training ``dBIC`` (which charges ``ln N_eff``
+    per parameter: parsimony) decides among them. A mass in the force-sensor path (one parameter)
+    and a compliant mode (three) can both improve a run excited below the mode; the simpler one
+    wins unless the mode is better on the withheld data beyond its uncertainty."""
+    best = max(passing, key=lambda t: t[0].improvement)[0]
+    tolerance = best.fold_spread / math.sqrt(max(folds, 1)) if math.isfinite(best.fold_spread) \
+        else 0.0
+    close = [t for t in passing if t[0].improvement >= best.improvement - tolerance]
+    return min(close, key=lambda t: t[0].delta_bic)
+
+
+def _step(trial: Trial, data: IdentificationData, before: np.ndarray, after: np.ndarray) -> Step:
+    from panto.identification.diagnosis.residual_energy import energy_by_band, energy_by_segment
+
+    fit_before, fit_after = _fit(data, before), _fit(data, after)
+    removed, bands, segments = {}, {}, {}
+    for j, o in enumerate(data.output_names):
+        y = data.outputs[:, j]
+        ok = np.isfinite(y)
+        measured = np.where(ok, y, before[:, j])
+        e0, e1 = measured - before[:, j], np.where(ok, y, after[:, j]) - after[:, j]
+        removed[o] = 1.0 - float(np.sum(e1 ** 2) / max(np.sum(e0 ** 2), 1e-300))
+        b0 = energy_by_band(measured, e0, data.sample_period)
+        b1 = energy_by_band(measured, e1, data.sample_period, band_edges=b0.band_edges)
+        bands[o] = {"edges_hz": b0.band_edges.tolist(), "before": b0.residual_power.tolist(),
+                    "after": b1.residual_power.tolist()}
+        s0 = energy_by_segment(measured, e0, data.sample_period, start_time=float(data.time[0]))
+        s1 = energy_by_segment(measured, e1, data.sample_period, start_time=float(data.time[0]))
+        segments[o] = {"start_s": s0.start_times.tolist(), "rms_before": s0.residual_rms.tolist(),
+                       "rms_after": s1.residual_rms.tolist()}
+    return Step(trial.effect, trial.description, dict(trial.parameters), dict(trial.std),
+                fit_before, fit_after, removed, bands, segments)
+
+
+def _summary(verdict: str, effects: Sequence[str], before: Mapping[str, float],
+             after: Mapping[str, float], where: Mapping[str, Any],
+             remaining: Mapping[str, Any]) -> str:
+    if verdict == "none":
+        return ("the gap is within the noise: the validation residual is independent of the "
+                "inputs, shows no nonlinearity and no offset, and no candidate effect improves "
+                "the withheld fit significantly")
+    fits = ", ".join(f"{o} {before[o]:.1f} -> {after[o]:.1f} %" for o in before)
+    if verdict == "unexplained":
+        return (f"a significant gap that no candidate closes on the withheld data; it lies "
+                f"{where.get('text', '')}")
+    rest = "; a significant gap remains: " + "; ".join(remaining.get("reasons", [])) \
+        if remaining.get("significant") else ""
+    return f"{' then '.join(effects)}: validation fit {fits}{rest}"
+
+
+def _training_only(rounds: Sequence[Mapping[str, Any]], accepted: Sequence[str]
+                   ) -> list[dict[str, Any]]:
+    """The effects the training run supports decisively (``dBIC < -10``, ``|theta|/sigma > 3``)
+    that were rejected only because the withheld run shows no gain (none made an output worse):
+    the validation run does not excite them, so it can neither confirm nor refute them. From the
+    last round (earlier rounds judged them against a model since changed); strongest training
+    evidence first."""
+    found = []
+    for trial in (rounds[-1].get("tried", ()) if rounds else ()):
+        effect = trial["effect"]
+        failed = trial.get("failed", ())
+        if effect in accepted or not failed or not all(f.startswith(NO_GAIN_REASONS) for f in failed):
+            continue
+        found.append({"effect": effect, "variant": trial["variant"],
+                      "delta_bic": trial["delta_bic"], "improvement": trial["improvement"]})
+    return sorted(found, key=lambda item: item["delta_bic"])
+
+
+def _training_only_text(items: Sequence[Mapping[str, Any]]) -> str:
+    if not items:
+        return ""
+    return ("; decisive on training but not shown by the withheld run (which does not excite "
+            "them; a run that does would tell): " + ", ".join(
+                f"{i['effect']} {i['variant']} (dBIC {i['delta_bic']:.0f}, validation "
+                f"{i['improvement']:+.2f} points)" for i in items))
+
+
+__all__ = ["diagnose", "fit_nominal", "Diagnosis", "Trial", "Step", "effective_samples"]

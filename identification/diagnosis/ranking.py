@@ -1,0 +1,213 @@
+"""The candidate ranking of :func:`panto.identification.diagnosis.pipeline.diagnose` on the training residual:
+FROLS error-reduction ratios of the effects' physical regressors (:func:`panto.identification.diagnosis.effects.
+rank_effects`), each regressor taken as it reaches the outputs (through a linear output-error
+model's filter, or through the nominal's own response to the input it enters,
+:func:`input_paths`), and the start settings of the augmentations the refits begin from.
+"""
+from __future__ import annotations
+
+import dataclasses
+import time
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from panto.identification.diagnosis.augmentations import INPUT_SIDE, equivalent_input
+from panto.identification.estimation.base import IdentificationData, IdentificationError, ModelStructure
+from panto.identification.diagnosis.support import residuals, sensitivities
+from panto.identification.diagnosis.effects import (SignalRoles, build_candidate_regressors, filter_sensitivity,
+                                    name_signals, rank_effects, sensor_acceleration,
+                                    sensor_signal)
+
+# --- the ranking on the training residual -----------------------------------------------------
+
+def _innermost(structure: ModelStructure) -> ModelStructure:
+    while hasattr(structure, "nominal_structure"):
+        structure = structure.base if getattr(structure, "mode", "") == "inside" else \
+            structure.nominal_structure
+    return structure
+
+
+def _output_filter(structure: ModelStructure, parameters: Mapping[str, float], output: str,
+                   drive: str):
+    from panto.identification.structures.output_error import LinearOutputError
+
+    inner = _innermost(structure)
+    if not isinstance(inner, LinearOutputError):
+        return None
+    f, b = inner.polynomials({k: v for k, v in parameters.items()
+                              if k in inner.parameter_names}, output)
+    return filter_sensitivity(b[drive], f)
+
+
+def rank_candidates(model: Any, train: IdentificationData, roles: SignalRoles,
+                    candidates: Sequence[str], max_refits: int) -> dict[str, Any]:
+    """FROLS ranking per output of the current model's training residual; the top candidates
+    with start settings for their augmentation.
+
+    The ranking screens, the refit judges: the `max_refits` refits go to the significant
+    candidates first, then to the best of the rest (ERR >= :data:`MIN_ERR`), each ordered by
+    its ERR summed over the outputs (each output's ERR is a share of that output's residual
+    energy; one physical cause should explain the gap in every output it reaches), because an effect
+    the nominal has partly absorbed shows a weak signature on the training residual (its
+    projection on the nominal's sensitivities is removed) yet can still be the one that closes
+    the gap once refitted in the model. Input-side effects count per input.
+
+    A regressor is scored as it reaches the output: through the linear OE model's filter, or,
+    for any other nominal, through the nominal's own response to the input it enters
+    (:func:`input_paths`: delays, lags, dead zones and saturations of an input, and effects with an
+    equivalent input); output-side signatures are scored as they are."""
+    y_hat, eps = residuals(model.structure, model.parameters, train)
+    signals = name_signals(train.inputs, train.input_names, y_hat, train.output_names)
+    regressors = {k: v for k, v in build_candidate_regressors(
+        signals, train.sample_period, roles=roles).items() if k in candidates}
+    if not regressors:
+        return {"top": [], "per_output": {}}
+    jac = sensitivities(model.structure, model.parameters, model.free, train)
+    drive = next((a for a in roles.actuators if a in train.input_names), train.input_names[0])
+    paths = {} if _output_filter(model.structure, model.parameters, train.output_names[0],
+                                 drive) else input_paths(model, train, regressors, y_hat)
+    best: dict[str, dict[str, Any]] = {}
+    total: dict[str, float] = {}
+    per_output = {}
+    for j, output in enumerate(train.output_names):
+        target = eps[:, j]
+        if not np.any(target):
+            continue
+        base = jac[:, j, :] if jac.shape[2] else None
+        if base is not None:
+            base = base[:, np.linalg.norm(base, axis=0) > 0]
+        sensitivity = _output_filter(model.structure, model.parameters, output, drive)
+        if paths:
+            regressors = {e: {v: (paths[(e, v)][:, j] if (e, v) in paths else x, setting)
+                              for v, (x, setting) in variants.items()}
+                          for e, variants in regressors.items()}
+        split = _split_per_input(regressors)
+        try:
+            ranking = rank_effects(target, split, base=base, sensitivity=sensitivity,
+                                   max_steps=3)
+        except IdentificationError:
+            continue
+        per_output[output] = ranking.to_dict()
+        for score in ranking.first_step:
+            if not score.err >= MIN_ERR:
+                continue
+            key = score.effect
+            score = dataclasses.replace(score, effect=score.effect.split("@")[0])
+            total[key] = total.get(key, 0.0) + float(score.err)
+            if key not in best or (score.significant, score.err) > (
+                    best[key]["significant"], best[key]["err"]):
+                coefficient = _coefficient(split[key][score.variant][0], target, base,
+                                           sensitivity)
+                setting = _setting(score, output, coefficient, signals, train, roles, drive)
+                through = equivalent_input(model.structure, score.effect)
+                if through:
+                    setting["input_scale"] = float(np.std(train.input(through))) or 1.0
+                best[key] = {
+                    "effect": score.effect, "variant": score.variant, "err": float(score.err),
+                    "significant": bool(score.significant), "output": output,
+                    "setting": setting}
+    for key, candidate in best.items():
+        candidate["err_total"] = total[key]
+    top = sorted(best.values(), key=lambda c: (not c["significant"], -c["err_total"]))
+    return {"top": top[:max_refits], "per_output": per_output}
+
+
+#: Smallest error-reduction ratio for a candidate to be refitted at all.
+MIN_ERR = 0.005
+
+
+def _split_per_input(regressors: Mapping[str, Mapping[str, Any]]) -> dict[str, dict[str, Any]]:
+    """Input-side effects as one candidate per input (``actuator_lag@p``): a lag on the pressure
+    and a lag on the slider height are different hypotheses, ranked and refitted separately."""
+    split: dict[str, dict[str, Any]] = {}
+    for effect, variants in regressors.items():
+        for label, (x, setting) in variants.items():
+            where = setting.get("input") if effect in INPUT_SIDE else None
+            split.setdefault(f"{effect}@{where}" if where else effect, {})[label] = (x, setting)
+    return split
+
+
+def _coefficient(x: np.ndarray, target: np.ndarray, base: np.ndarray | None, sensitivity) -> float:
+    x = sensitivity(x) if sensitivity else np.asarray(x, float)
+    r = np.asarray(target, float)
+    if base is not None and base.shape[1]:
+        q, _ = np.linalg.qr(base)
+        x, r = x - q @ (q.T @ x), r - q @ (q.T @ r)
+    xx = float(x @ x)
+    return float(x @ r / xx) if xx > 0 else 0.0
+
+
+def _setting(score: Any, output: str, coefficient: float, signals: Mapping[str, np.ndarray],
+             data: IdentificationData, roles: SignalRoles, drive: str) -> dict[str, Any]:
+    y = signals[output]
+    setting = {**dict(score.setting), "output": output, "coefficient": coefficient,
+               "scale": float(np.std(y)) or 1.0, "nyquist": 0.5 / data.sample_period,
+               "drive": score.setting.get("drive", drive), "start": coefficient,
+               "native_start": abs(coefficient) if score.effect == "coulomb_friction" else 0.0,
+               "max_delay_s": 0.1 * (data.time[-1] - data.time[0])}
+    position = signals.get(roles.position) if roles.position else None
+    if position is not None:
+        setting["centre"] = float(np.median(position))
+        setting["position_scale"] = float(np.std(position)) or 1.0
+    sensor = sensor_signal(roles, list(signals))
+    if sensor is not None:  # the acceleration sensor_inertia's mass follows (its bound's scale)
+        setting["acceleration_scale"] = float(np.std(sensor_acceleration(
+            signals[sensor], data.sample_period))) or 1.0
+    signal = setting.get("signal") or setting.get("input")
+    if score.effect == "dead_zone" and signal in signals:
+        setting["centre"] = float(np.median(signals[signal]))
+    if setting["drive"] not in data.input_names and score.effect != "extra_mode":
+        setting["drive"] = drive
+    phi_scale = {"cubic_stiffness": setting.get("position_scale", 1.0) ** 3}.get(score.effect, 1.0)
+    u_scale = float(np.std(signals[drive])) if drive in signals else 1.0
+    setting["bound"] = 100.0 * max(abs(coefficient), u_scale / max(phi_scale, 1e-30))
+    return setting
+
+
+# --- how a regressor reaches the outputs ------------------------------------------------------
+
+#: Wall time [s] the directional responses of :func:`input_paths` may take per ranking.
+PATH_BUDGET = 20.0
+
+
+def input_paths(model: Any, data: IdentificationData,
+                regressors: Mapping[str, Mapping[str, tuple[np.ndarray, dict]]],
+                y_hat: np.ndarray) -> dict[tuple[str, str], np.ndarray]:
+    """The nominal's response to each input-entering regressor, ``(N, n_outputs)`` per
+    ``(effect, variant)``: ``(y_hat(u_a + h phi) - y_hat(u)) / h``, the directional derivative of
+    the free run along ``phi`` added to input ``a`` (the input a delay, lag, dead zone or
+    saturation transforms, or the effect's equivalent input,
+    :func:`~panto.identification.diagnosis.augmentations.equivalent_input`). A term that enters an input reaches
+    an output only through the model's dynamics; scored raw, a lag of the bellow pressure would
+    look like nothing the force residual holds. ``h`` is 1 % of the input's spread over the
+    regressor's. Empty when the simulations would exceed :data:`PATH_BUDGET` (one timed first)."""
+    structure, parameters = model.structure, model.parameters
+    jobs = []
+    for effect, variants in regressors.items():
+        for label, (x, setting) in variants.items():
+            name = equivalent_input(structure, effect) if effect not in INPUT_SIDE else \
+                (setting.get("input") or setting.get("signal"))
+            if name in data.input_names:
+                jobs.append(((effect, label), name, np.asarray(x, float)))
+    out: dict[tuple[str, str], np.ndarray] = {}
+    started = time.perf_counter()
+    for count, (key, name, x) in enumerate(jobs):
+        if count == 1 and (time.perf_counter() - started) * len(jobs) > PATH_BUDGET:
+            return {}
+        spread = float(np.std(x))
+        if not spread > 0:
+            continue
+        index = data.input_names.index(name)
+        h = 0.01 * (float(np.std(data.inputs[:, index])) or 1.0) / spread
+        inputs = np.array(data.inputs, float)
+        inputs[:, index] += h * x
+        try:
+            y1, _ = residuals(structure, parameters, dataclasses.replace(data, inputs=inputs))
+        except (IdentificationError, ValueError, ArithmeticError):
+            continue
+        out[key] = (y1 - y_hat) / h
+    return out
+
+
+__all__ = ["rank_candidates", "input_paths", "MIN_ERR", "PATH_BUDGET"]

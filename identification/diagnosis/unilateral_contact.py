@@ -1,0 +1,313 @@
+"""Unilateral contact in a linear(ised) model: the head leaves the wire and flies (issue 8).
+
+The contact element of the project's pantograph models is the carbon-contact spring between the
+head and the wire (slider) height ``eta``: ``g = k_ph (xi - eta)`` in the physical model (thesis
+section 2.5, :mod:`panto.fmu_src.pantograph`), ``g = k_E (z_n + y_0 - eta)`` on the top mass of the
+two-/three-mass oscillators (eq. 2.33/2.34). It carries no damper. A bilateral model lets the
+wire pull the head (``g < 0``); the real contact can only push. With the contact force acting on
+the states through the column ``b_c`` (``M^-1`` times the generalised-force direction of the head
+coordinate), the bilateral linear(ised) model ``x' = A x + B u`` holds the term ``-b_c g``
+(``g = c_F x + d_F u``); the wire's real push ``max(g, 0)`` in its place gives
+
+    x' = A x + B u + b_c (g - max(g, 0)) = A x + B u + b_c min(g, 0),     F_c = max(g, 0),
+
+i.e. a switched pair of linear systems: in contact (``g >= 0``) the model itself; in flight
+(``g < 0``) the contact element removed, ``A_f = A + b_c c_F``, ``B_f = B + b_c d_F`` (the wire
+input then drops out of the dynamics; a static contact force ``F_0`` of the linearisation point
+becomes the constant upward push ``b_c F_0`` that the wire no longer takes up). The state is
+continuous across a switch and so is the right-hand side (the spring force is zero at the
+switch), so the switched system is Lipschitz and its solution unique.
+
+``b_c`` need not be derived separately: the wire input enters only through the contact spring,
+``B[:, eta] = b_c k`` and ``d_F[eta] = -k``, so ``b_c = -B[:, eta] / d_F[eta]``. For the
+physical model linearised about an in-contact equilibrium the flight matrices are the
+linearisation of the contact-free model about the same point (the spring is linear, and the
+head's inertia ``m_c`` is decoupled from the arms', so the acceleration the removed force leaves
+adds no ``dM/dq a`` term).
+
+Simulation (:func:`simulate_switched`): exact discretisation of both modes for inputs linear
+between samples (first-order hold; or held, ``"zoh"``) on ``M`` sub-steps per sample from the
+block exponential ``E(h) = expm([[A, B, 0], [0, 0, I], [0, 0, 0]] h)`` of the state, input and
+input-slope (``E(j h) = E(h)^j``: Franklin, Powell & Workman, *Digital Control of Dynamic
+Systems*, sec. 6.3). Each sample is first tried whole in the current mode; the contact force
+predicted at its ``M`` sub-step instants costs one ``M x n`` product. When the force keeps its
+sign the whole-sample step is taken, otherwise the sample is run sub-step by sub-step, the mode
+chosen by the sign of ``g`` at each sub-step's start. Because the right-hand side is continuous,
+the switch's timing error (below ``h = T / M``) leaves a local error of order ``h^2``.
+A flight shorter than one sub-step, beginning and ending inside it, is not seen.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from panto.identification.estimation.base import IdentificationError, ModelStructure
+from panto.identification.structures.linearisation import expm, propagate
+
+#: Sub-steps per sample where the contact switches (module notes).
+SUBSTEPS = 32
+IN_CONTACT, IN_FLIGHT = 0, 1
+
+
+@dataclass(frozen=True)
+class SwitchedRun:
+    """Result of :func:`simulate_switched`.
+
+    Attributes
+    ----------
+    states : ndarray, shape (n_samples, n_states)
+    force : ndarray, shape (n_samples,)
+        Contact force ``max(g, 0)`` at the samples: exactly zero in flight.
+    in_contact : ndarray of bool, shape (n_samples,)
+    switched : bool
+        Whether the contact was ever lost (otherwise the run is the linear model's own).
+    """
+
+    states: np.ndarray
+    force: np.ndarray
+    in_contact: np.ndarray
+    switched: bool
+
+
+def contact_column(b: np.ndarray, d_force: np.ndarray, wire: int) -> np.ndarray:
+    """``b_c = -B[:, wire] / d_F[wire]``: the state derivative per newton of contact force.
+
+    The wire input reaches the dynamics only through the contact spring (module notes), so its
+    input column is the contact column times the spring's stiffness ``k = -d_F[wire]``.
+    """
+    stiffness = -float(d_force[wire])
+    if not stiffness > 0.0:
+        raise IdentificationError(f"unilateral contact: the contact force does not grow as the "
+                                  f"head presses on the wire (dF/deta = {-stiffness:g})")
+    return np.asarray(b, float)[:, wire] / stiffness
+
+
+def _modes(a: np.ndarray, b: np.ndarray, c_force: np.ndarray, d_force: np.ndarray,
+           column: np.ndarray) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
+    """``(A, B)`` in contact and in flight (contact element removed)."""
+    return (a, b), (a + np.outer(column, c_force), b + np.outer(column, d_force))
+
+
+def _tables(a: np.ndarray, b: np.ndarray, period: float, substeps: int) -> np.ndarray:
+    """``E(j h)``, ``j = 1..M``, of the state/input/slope block (module notes), shape (M, N, N)."""
+    n, m = b.shape
+    block = np.zeros((n + 2 * m, n + 2 * m))
+    block[:n, :n] = a
+    block[:n, n:n + m] = b
+    block[n:n + m, n + m:] = np.eye(m)
+    step = expm(block * (period / substeps))
+    tables = np.empty((substeps,) + step.shape)
+    tables[0] = step
+    for j in range(1, substeps):
+        tables[j] = tables[j - 1] @ step
+    return tables
+
+
+@dataclass
+class _Mode:
+    """Pre-computed maps of one mode (internal); ``z = [x, u, du/dt]`` at a sub-step instant."""
+
+    maps: np.ndarray      # (M, n, n + 2m): x((j + 1) h) = maps[j] @ z
+    rows: np.ndarray      # (M, n + 2m): c_F maps[j], the force's state part at those instants
+    drive: np.ndarray     # (N - 1, n): the whole sample's input part
+    offsets: np.ndarray   # (N - 1, M): the rest of g at the sub-step instants of each sample
+    phi: np.ndarray       # (n, n): the whole sample's state transition
+    rows_x: np.ndarray    # (M, n): the state part of `rows`
+
+
+def _prepare(a, b, c_force, d_force, u, slope, period, substeps) -> _Mode:
+    n, m = b.shape
+    maps = _tables(a, b, period, substeps)[:, :n, :]
+    rows = c_force @ maps
+    instants = np.arange(1, substeps + 1) * (period / substeps)
+    offsets = (u[:-1] @ (rows[:, n:n + m] + d_force).T + slope @ rows[:, n + m:].T
+               + (slope @ d_force)[:, None] * instants[None, :])
+    drive = u[:-1] @ maps[-1, :, n:n + m].T + slope @ maps[-1, :, n + m:].T
+    return _Mode(maps, rows, drive, offsets, maps[-1, :, :n].copy(), rows[:, :n].copy())
+
+
+def simulate_switched(a: np.ndarray, b: np.ndarray, c_force: np.ndarray, d_force: np.ndarray,
+                      column: np.ndarray, u: np.ndarray, x0: np.ndarray, period: float, *,
+                      hold: str = "foh", substeps: int = SUBSTEPS) -> SwitchedRun:
+    """Free run of ``x' = A x + B u + b_c min(g, 0)``, ``g = c_F x + d_F u`` (module notes).
+
+    Parameters
+    ----------
+    a, b : ndarray
+        The model in contact (bilateral), ``(n, n)`` and ``(n, m)``.
+    c_force, d_force : ndarray
+        The contact force ``g = c_F x + d_F u`` (``(n,)``, ``(m,)``); a constant part goes in a
+        constant input column of `u`.
+    column : ndarray
+        ``b_c`` (:func:`contact_column`).
+    u : ndarray, shape (N, m)
+        Input samples every `period` seconds.
+    x0 : ndarray
+        State at the first sample.
+    hold : {"foh", "zoh"}
+        Inputs linear between samples or held.
+    substeps : int
+        ``M`` (module notes).
+    """
+    u, x0 = np.asarray(u, float), np.asarray(x0, float)
+    if hold not in ("foh", "zoh") or substeps < 1 or len(u) < 2:
+        raise IdentificationError(f"switched simulation: hold {hold!r}, substeps {substeps}, "
+                                  f"{len(u)} samples")
+    slope = np.diff(u, axis=0) / period if hold == "foh" else np.zeros((len(u) - 1, u.shape[1]))
+    modes = [_prepare(ai, bi, c_force, d_force, u, slope, period, substeps)
+             for ai, bi in _modes(a, b, c_force, d_force, column)]
+    contact = modes[IN_CONTACT]
+    with np.errstate(over="ignore", invalid="ignore"):  # a diverging run is refused below
+        states = propagate(contact.phi, contact.drive, x0)
+        inside = states[:-1] @ contact.rows_x.T + contact.offsets
+    g = states @ c_force + u @ d_force
+    lost = np.flatnonzero((inside < 0.0).any(axis=1) | (g[:-1] < 0.0))
+    if len(lost) == 0:
+        return SwitchedRun(states, np.maximum(g, 0.0), np.ones(len(u), bool), False)
+    with np.errstate(over="ignore", invalid="ignore"):
+        _run_switched(modes, states, u, slope, int(lost[0]), c_force, d_force, period / substeps)
+    g = states @ c_force + u @ d_force
+    return SwitchedRun(states, np.maximum(g, 0.0), g >= 0.0, True)
+
+
+def _run_switched(modes: list[_Mode], states: np.ndarray, u: np.ndarray, slope: np.ndarray,
+                  start: int, c_force: np.ndarray, d_force: np.ndarray, h: float) -> None:
+    """Overwrite ``states[start + 1:]`` by the switched recursion (module notes)."""
+    n = states.shape[1]
+    x = states[start].copy()
+    mode = IN_CONTACT if float(c_force @ x + d_force @ u[start]) >= 0.0 else IN_FLIGHT
+    for k in range(start, len(u) - 1):
+        current = modes[mode]
+        g = current.rows_x @ x + current.offsets[k]
+        wrong = g < 0.0 if mode == IN_CONTACT else g >= 0.0
+        if not wrong.any():
+            x = current.phi @ x + current.drive[k]
+        else:
+            z = np.concatenate([x, u[k], slope[k]])
+            x, mode = _within(modes, mode, z, int(np.argmax(wrong)), g, c_force, d_force, h, n)
+        states[k + 1] = x
+    if not np.all(np.isfinite(states)):
+        raise IdentificationError("switched simulation diverged (unilateral contact)")
+
+
+def _within(modes: list[_Mode], mode: int, z: np.ndarray, first: int, g: np.ndarray,
+            c_force: np.ndarray, d_force: np.ndarray, h: float, n: int) -> tuple[np.ndarray, int]:
+    """One sample across its switches: from sub-step instant ``j``, the current mode runs to the
+    sub-step boundary nearest the first sign change of ``g`` (linear interpolation between the
+    instants, at least one sub-step), where the mode toggles; until the sample's end."""
+    count = len(modes[IN_CONTACT].maps)
+    m = (len(z) - n) // 2
+    u_start, slope = z[n:n + m], z[n + m:]
+    j = 0
+    while True:
+        before = float(c_force @ z[:n] + d_force @ z[n:n + m]) if first == 0 else g[first - 1]
+        share = before / (before - g[first]) if before != g[first] else 1.0
+        steps = max(first + (1 if share > 0.5 else 0), 1)
+        z = np.concatenate([modes[mode].maps[steps - 1] @ z, u_start + slope * ((j + steps) * h),
+                            slope])
+        j += steps
+        if j >= count:  # the next sample starts in the mode of its first force
+            end = float(c_force @ z[:n] + d_force @ z[n:n + m])
+            return z[:n], IN_CONTACT if end >= 0.0 else IN_FLIGHT
+        mode = 1 - mode
+        ramp = (d_force @ slope) * h * np.arange(1, count - j + 1)
+        g = modes[mode].rows[:count - j] @ z + ramp + d_force @ z[n:n + m]
+        wrong = g < 0.0 if mode == IN_CONTACT else g >= 0.0
+        if not wrong.any():
+            return modes[mode].maps[count - j - 1] @ z, mode
+        first = int(np.argmax(wrong))
+
+
+# --- the structure --------------------------------------------------------------------------
+
+def supports_unilateral(nominal: ModelStructure) -> bool:
+    """Whether `nominal` is a linear(ised) pantograph structure whose contact element this module
+    can make unilateral: ``physical-linear``, or a two-/three-mass oscillator without friction."""
+    from panto.identification.structures.oscillators import OscillatorStructure
+    from panto.identification.structures.physical import PhysicalLinear
+
+    return type(nominal) is PhysicalLinear or (type(nominal) is OscillatorStructure
+                                               and not nominal.friction)
+
+
+class UnilateralContact(ModelStructure):
+    """A linear(ised) pantograph structure with its carbon contact made unilateral.
+
+    Same parameters, inputs and outputs as `nominal` (no new parameter: the contact's stiffness
+    is the nominal's ``k_ph`` or ``k_E``); :meth:`simulate` runs :func:`simulate_switched`.
+
+    Parameters
+    ----------
+    nominal : PhysicalLinear or OscillatorStructure
+        See :func:`supports_unilateral`.
+    substeps : int
+        Sub-steps per sample at a switch (module notes).
+    """
+
+    def __init__(self, nominal: ModelStructure, *, substeps: int = SUBSTEPS) -> None:
+        if not supports_unilateral(nominal):
+            raise IdentificationError(f"unilateral contact: no linear contact element in "
+                                      f"{nominal.name!r}")
+        self.nominal_structure = nominal
+        self.substeps = int(substeps)
+        self.name = f"{nominal.name}+contact_loss"
+        self.input_names, self.output_names = nominal.input_names, nominal.output_names
+        self.parameter_names = tuple(nominal.parameter_names)
+        self.difference_step = getattr(nominal, "difference_step", 1e-6)
+
+    def __getattr__(self, name: str):
+        if name.startswith("__") or "nominal_structure" not in self.__dict__:
+            raise AttributeError(name)
+        return getattr(self.nominal_structure, name)  # fixed, hold, default_free, ...
+
+    def nominal(self) -> dict[str, float]:
+        return self.nominal_structure.nominal()
+
+    def bounds(self) -> dict[str, tuple[float, float]]:
+        return self.nominal_structure.bounds()
+
+    def run(self, parameters, data) -> tuple[SwitchedRun, np.ndarray, np.ndarray, np.ndarray]:
+        """The switched run on `data`, with the output maps ``(C, D)`` for inputs ``u`` extended
+        by a constant column (all outputs ``(y_cb, xi, F_c)``)."""
+        a, b, c, d, u, x0, hold = self._linear_form(parameters, data)
+        column = contact_column(b, d[2], 0)
+        run = simulate_switched(a, b, c[2], d[2], column, u, x0, data.sample_period,
+                                hold=hold, substeps=self.substeps)
+        return run, c, d, u
+
+    def simulate(self, parameters, data) -> np.ndarray:
+        """Free run with the unilateral contact: the force output is ``max(g, 0)``."""
+        run, c, d, u = self.run(parameters, data)
+        rows = [("y_cb", "xi", "F_c").index(o) for o in self.output_names]
+        y = run.states @ c[rows].T + u @ d[rows].T
+        if "F_c" in self.output_names:
+            y[:, self.output_names.index("F_c")] = run.force
+        if not np.all(np.isfinite(y)):
+            raise IdentificationError(f"{self.name}: non-finite outputs for {dict(parameters)}")
+        return y
+
+    def _linear_form(self, parameters, data):
+        """``(A, B, C, D, u, x0, hold)`` with a constant last input column (any static part)."""
+        nominal = self.nominal_structure
+        if hasattr(nominal, "deviation_model"):  # physical-linear: deviations from u0
+            a, b, c, d, y0, du, x0 = nominal.deviation_model(parameters, data)
+            _check_stable(a, nominal.name, parameters)
+            b = np.hstack([b, np.zeros((len(b), 1))])
+            d = np.hstack([d, y0[:, None]])
+            return a, b, c, d, np.column_stack([du, np.ones(len(du))]), x0, nominal.hold
+        a, b, c, d = nominal.matrices(parameters)  # oscillators: inputs (eta, p, 1)
+        _check_stable(a, nominal.name, parameters)
+        u = np.column_stack([data.input("eta"), data.input("p"), np.ones(len(data))])
+        return a, b, c, d, u, nominal.equilibrium(parameters, u[0, 0], u[0, 1]), nominal.hold
+
+
+def _check_stable(a: np.ndarray, name: str, parameters) -> None:
+    """The model in contact must be stable (as its bilateral structure requires); in flight it
+    need not be: a pantograph without its wire rises under the uplift until it meets it."""
+    if not np.all(np.isfinite(a)) or np.max(np.linalg.eigvals(a).real) > 1e-9:
+        raise IdentificationError(f"{name}: unstable linear model for {dict(parameters)}")
+
+
+__all__ = ["SwitchedRun", "UnilateralContact", "contact_column", "simulate_switched",
+           "supports_unilateral", "SUBSTEPS"]

@@ -1,0 +1,1 @@
+"""Model structures to identify: physical pantograph, oscillators, black box, collector head."""
