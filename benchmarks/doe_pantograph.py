@@ -29,11 +29,8 @@ from pathlib import Path
 HERE = Path(__file__).parent
 sys.path.insert(0, str(HERE.parent))
 
-from panto.identification.design.pantograph import (
-    DesignOptions,
-    RigInputConstraints,
-    design_pantograph_experiment,
-)
+from panto.identification.design.constraints import RigInputConstraints
+from panto.identification.design.pantograph import DesignOptions, design_pantograph_experiment
 from panto.identification.design.profiles import compare_on_virtual_rig
 from panto.identification.design.pantograph_sensitivity import LinearisedPantograph
 

@@ -67,10 +67,11 @@ def time_pantograph(generations: int = 60, online_steps: int = 50) -> dict:
     parameters of the linearised physical model, and receding-horizon online steps (horizon 20
     samples of both inputs, GA population 20 x 12 generations) on a 2.4 s sensitivity window,
     the information of older samples kept as a fixed prior, against the 20 ms sample period."""
-    from panto.identification.design.input_design import (InputConstraints, _DesignProblem, _run_genetic,
-                                             _SequenceRepair)
-    from panto.identification.design.pantograph import (DesignOptions, RigInputConstraints,
-                                                  design_pantograph_experiment, model_inputs)
+    from panto.identification.design.input_design import (DesignProblem, InputConstraints,
+                                                          SequenceRepair, run_genetic)
+    from panto.identification.design.constraints import RigInputConstraints
+    from panto.identification.design.pantograph import (DesignOptions, design_pantograph_experiment,
+                                                         model_inputs)
     from panto.identification.design.pantograph_sensitivity import LinearisedPantograph
 
     free = ("m_c", "c_c", "k_c", "k_p", "c1", "m1")
@@ -94,10 +95,10 @@ def time_pantograph(generations: int = 60, online_steps: int = 50) -> dict:
         prior = model.fisher(past_all[:k - window + 1], variance) + 1e-9 * np.eye(len(free))
         tick = time.perf_counter()
         past = past_all[k - window:k]
-        problem = _DesignProblem(short, short.theta, limits, (horizon, 2), "D", variance,
+        problem = DesignProblem(short, short.theta, limits, (horizon, 2), "D", variance,
                                  past, past[-1], prior)
-        repair = _SequenceRepair(limits, (horizon, 2), past[-1])
-        _run_genetic(problem, np.zeros((1, 2 * horizon)), GeneticOptions(20, 12, seed=k),
+        repair = SequenceRepair(limits, (horizon, 2), past[-1])
+        run_genetic(problem, np.zeros((1, 2 * horizon)), GeneticOptions(20, 12, seed=k),
                      repair, limits.arrays()[2])
         steps.append(time.perf_counter() - tick)
     steps = np.array(steps)
@@ -118,7 +119,7 @@ def time_pantograph_online(samples: int = 150) -> list[dict]:
     design_online_step`: SLSQP, exact gradient, warm start, every rig limit incl. acceleration
     and contact force) in closed loop on the linearised physical model, 6 parameters, per
     horizon / move-block setting: seconds per step against the 20 ms period at 50 Hz."""
-    from panto.identification.design.pantograph import RigInputConstraints
+    from panto.identification.design.constraints import RigInputConstraints
     from panto.identification.design.pantograph_online import OnlineDesigner, run_online_design
     from panto.identification.design.pantograph_sensitivity import LinearisedPantograph
 

@@ -80,12 +80,22 @@ class SimulationError(RuntimeError):
         details = "".join(f"\n  {line}" for line in self.messages)
         super().__init__(message + (f"\nFMU log:{details}" if details else ""))
 
+    @classmethod
+    def from_call(cls, error: FMICallException, *, model: str, interface: str, time: float,
+                  messages: Sequence[str]) -> "SimulationError":
+        """The error for a failed FMU call `error` of `model` at simulation time `time` [s]."""
+        label = STATUS_LABELS[error.status].lower() if 0 <= error.status < 6 else "?"
+        return cls(f"{model} ({interface}): {error.function} failed with status {error.status} "
+                   f"({label}) at t = {time:g} s", function=error.function, status=error.status,
+                   time=time, messages=messages)
+
 
 def _describe_names(names: Sequence[str]) -> str:
     return ", ".join(sorted(names)) if names else "(none)"
 
 
-def _check_names(given: Sequence[str], valid: Sequence[str], role: str, model: str) -> None:
+def check_names(given: Sequence[str], valid: Sequence[str], role: str, model: str) -> None:
+    """Raise :class:`UnknownVariableError` naming every name of `given` not in `valid`."""
     unknown = [name for name in given if name not in valid]
     if unknown:
         raise UnknownVariableError(f"{model} has no {role} named {', '.join(map(repr, unknown))}; "
@@ -218,8 +228,8 @@ class FmuSimulator:
                        if variable.type in _FLOAT_TYPES and variable.causality != "independent"]
         self.output_names = tuple(self._names_with_causality("output") if output_names is None
                                   else output_names)
-        _check_names(self.output_names, float_names, "Real/Float64 variable", md.modelName)
-        _check_names(self.input_names, float_names, "Real/Float64 input", md.modelName)
+        check_names(self.output_names, float_names, "Real/Float64 variable", md.modelName)
+        check_names(self.input_names, float_names, "Real/Float64 input", md.modelName)
         self._validate = validate
         self._log = LogCollector()
         self._needs_reset, self._closed = False, False
@@ -353,15 +363,11 @@ class FmuSimulator:
         grid = _time_grid(time)
         table = self._input_table(grid, dict(inputs or {}))
         parameters, start_values = dict(parameters or {}), dict(start_values or {})
-        _check_names(list(parameters), self.parameter_names, "parameter", md.modelName)
-        _check_names(list(start_values), list(self.variables), "variable", md.modelName)
+        check_names(list(parameters), self.parameter_names, "parameter", md.modelName)
+        check_names(list(start_values), list(self.variables), "variable", md.modelName)
         parameters, start_values = self._coerce(parameters), self._coerce(start_values)
         output_times = _output_times(grid, output_interval)
-        if solver_tolerance is None and md.defaultExperiment is not None:
-            solver_tolerance = md.defaultExperiment.tolerance
-        if solver_tolerance is None and self.interface == "ME":
-            solver_tolerance = DEFAULT_ME_TOLERANCE
-        solver_tolerance = None if solver_tolerance is None else float(solver_tolerance)
+        solver_tolerance = self._solver_tolerance(solver_tolerance)
 
         self._prepare_instance()
         self._needs_reset = True
@@ -373,14 +379,7 @@ class FmuSimulator:
             outputs, events = run(output_times, table, solver_tolerance)
             self._fmu.terminate()
         except FMICallException as error:
-            if error.status >= _FATAL:
-                self._free_instance()
-            label = STATUS_LABELS[error.status].lower() if 0 <= error.status < 6 else "?"
-            raise SimulationError(f"{md.modelName} ({self.interface}): {error.function} failed "
-                                  f"with status {error.status} ({label}) at t = "
-                                  f"{self._time:g} s", function=error.function,
-                                  status=error.status, time=self._time,
-                                  messages=self._log.messages) from error
+            raise self._call_failed(error) from error
         except SimulationError:
             raise
         except Exception as error:  # solver failures (CVODE) and the like
@@ -390,8 +389,26 @@ class FmuSimulator:
         return self._response(output_times, outputs, parameters, start_values,
                               solver_tolerance, events)
 
+    def _solver_tolerance(self, given: float | None) -> float | None:
+        """The relative tolerance of a run: `given`, else the default experiment's, else (ME)
+        :data:`DEFAULT_ME_TOLERANCE`; None for CS without either."""
+        experiment = self.model_description.defaultExperiment
+        if given is None and experiment is not None:
+            given = experiment.tolerance
+        if given is None and self.interface == "ME":
+            given = DEFAULT_ME_TOLERANCE
+        return None if given is None else float(given)
+
+    def _call_failed(self, error: FMICallException) -> SimulationError:
+        """The :class:`SimulationError` for a failed FMU call (the instance freed if fatal)."""
+        if error.status >= _FATAL:
+            self._free_instance()
+        return SimulationError.from_call(error, model=self.model_description.modelName,
+                                         interface=self.interface, time=self._time,
+                                         messages=self._log.messages)
+
     def _input_table(self, grid: np.ndarray, inputs: dict[str, Any]) -> PiecewiseLinearInputs:
-        _check_names(list(inputs), self.input_names, "input", self.model_description.modelName)
+        check_names(list(inputs), self.input_names, "input", self.model_description.modelName)
         columns = []
         for name in self.input_names:
             value = inputs.get(name, _start_value(self.variables[name]) or 0.0)

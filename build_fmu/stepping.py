@@ -51,8 +51,8 @@ from typing import Any
 import numpy as np
 from fmpy.fmi1 import FMICallException
 
-from .fmi_plumbing import STATUS_LABELS, make_cvode_solver
-from .simulate import INTERFACES, FmuSimulator, SimulationError, _check_names
+from panto.build_fmu.fmi_plumbing import make_cvode_solver
+from panto.build_fmu.simulate import INTERFACES, FmuSimulator, SimulationError, check_names
 
 _FATAL = 4
 _OK_OR_WARNING = 1
@@ -198,15 +198,15 @@ class FmuStepper(FmuSimulator):
         self._set_stop_time = _set_stop_time_function() if interface == "ME" else None
 
     def _checked_parameters(self, parameters: Mapping[str, Any]) -> dict[str, Any]:
-        _check_names(list(parameters), list(self.variables), "variable",
-                     self.model_description.modelName)
+        check_names(list(parameters), list(self.variables), "variable",
+                    self.model_description.modelName)
         return dict(parameters)
 
     # --- instance -----------------------------------------------------------------------------
 
     def _instantiate(self) -> None:
-        _check_names(self._stepped_inputs, self.input_names, "input",
-                     self.model_description.modelName)
+        check_names(self._stepped_inputs, self.input_names, "input",
+                    self.model_description.modelName)
         super()._instantiate()
         self._in = _RawFloats(self._fmu, self.fmi3, self._references(self._stepped_inputs))
         self._out = _RawFloats(self._fmu, self.fmi3, self._references(self.output_names))
@@ -254,8 +254,8 @@ class FmuStepper(FmuSimulator):
     def _input_vector(self, inputs: Mapping[str, float] | Sequence[float] | np.ndarray
                       ) -> np.ndarray:
         if isinstance(inputs, Mapping):
-            _check_names(list(inputs), self._stepped_inputs, "stepped input",
-                         self.model_description.modelName)
+            check_names(list(inputs), self._stepped_inputs, "stepped input",
+                        self.model_description.modelName)
             missing = [name for name in self._stepped_inputs if name not in inputs]
             if missing:
                 raise ValueError(f"initialise: no value for input(s) {missing}")
@@ -480,12 +480,9 @@ class FmuStepper(FmuSimulator):
         if error.status >= _FATAL:
             self._free_instance()
             self._initialised = False
-        label = STATUS_LABELS[error.status].lower() if 0 <= error.status < 6 else "?"
-        return SimulationError(f"{self.model_description.modelName} ({self.interface}): "
-                               f"{error.function} failed with status {error.status} ({label}) "
-                               f"at t = {self._time:g} s", function=error.function,
-                               status=error.status, time=self._time,
-                               messages=self._log.messages)
+        return SimulationError.from_call(error, model=self.model_description.modelName,
+                                         interface=self.interface, time=self._time,
+                                         messages=self._log.messages)
 
     @contextlib.contextmanager
     def _fmi_errors(self) -> Iterator[None]:

@@ -43,13 +43,14 @@ from __future__ import annotations
 import math
 import time as clock
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from .pantographs import PantographSetup, pantograph_setup
+from .plots import plot_contact_force, plot_uplift
 from .statistics import ContactStatistics, compute_statistics, lowpass_filter, sample_rate
 
 #: Default catenary time step and communication step (s).
@@ -170,91 +171,120 @@ class _Clocks:
     fmu: float = 0.0
 
 
+@dataclass(frozen=True, kw_only=True)
+class CosimOptions:
+    """How a co-simulation run is discretised, where on the line it runs and how the FMU is driven.
+
+    Parameters
+    ----------
+    time_step : float
+        Catenary time step :math:`\\Delta t` [s] (ignored for a ready :class:`Catenary`).
+    communication_step : float or None
+        :math:`H` [s], an integer multiple of `time_step` (None: equal to it).
+    element_length : float or None
+        Catenary element length [m] (None: the catenary's; ignored for a ready catenary).
+    damping : bool
+        Structural (Rayleigh) damping of the line (ignored for a ready catenary).
+    start_position, stop_position : float or None
+        Where the run starts and ends [m] (None: first and last support).
+    section : (float, float) or None
+        Analysed section [m] (None: the line's analysed spans).
+    interface : {"CS", "ME"}
+        How the FMU is driven (:class:`panto.build_fmu.stepping.FmuStepper`).
+    fmu_cache : path or None
+        Folder for project FMUs built on demand.
+    check_coupling : bool
+        Refuse a coupling gain above :data:`MAX_COUPLING_GAIN` (module notes).
+    """
+
+    time_step: float = DEFAULT_TIME_STEP
+    communication_step: float | None = None
+    element_length: float | None = None
+    damping: bool = True
+    start_position: float | None = None
+    stop_position: float | None = None
+    section: tuple[float, float] | None = None
+    interface: str = "CS"
+    fmu_cache: str | Path | None = None
+    check_coupling: bool = True
+
+
 def cosimulate(line: Any, pantograph: PantographSetup | str, *, speed_kmh: float,
-               time_step: float = DEFAULT_TIME_STEP, communication_step: float | None = None,
-               element_length: float | None = None, damping: bool = True,
-               start_position: float | None = None, stop_position: float | None = None,
-               section: tuple[float, float] | None = None, interface: str = "CS",
-               fmu_cache: str | Path | None = None, check_coupling: bool = True,
-               progress: Callable[[str], None] | None = None) -> CosimulationResult:
+               options: CosimOptions | None = None,
+               progress: Callable[[str], None] | None = None,
+               **settings: Any) -> CosimulationResult:
     """Run a pantograph FMU along an overhead line at constant speed.
 
     Parameters
     ----------
     line : LineDefinition, str or Catenary
-        A line (or its name / JSON file), or a ready :class:`Catenary` (then `time_step`,
-        `element_length` and `damping` are its own).
+        A line (or its name / JSON file), or a ready :class:`Catenary` (then the time step,
+        element length and damping are its own).
     pantograph : PantographSetup or str
         A setup or the name of one (:data:`.pantographs.PANTOGRAPH_NAMES`).
     speed_kmh : float
         Running speed (km/h), positive and below the contact wire's wave speed.
-    time_step : float, optional
-        Catenary time step :math:`\\Delta t` (s).
-    communication_step : float, optional
-        :math:`H`, an integer multiple of `time_step` (default: equal to it).
-    element_length : float, optional
-        Catenary element length (m) (default: the catenary's).
-    damping : bool, optional
-        Structural (Rayleigh) damping of the line.
-    start_position, stop_position : float, optional
-        Where the run starts and ends (m) (default: first and last support).
-    section : (float, float), optional
-        Analysed section (m) (default: the line's analysed spans).
-    interface : {"CS", "ME"}, optional
-        How the FMU is driven (:class:`panto.build_fmu.stepping.FmuStepper`).
-    fmu_cache : path, optional
-        Folder for project FMUs built on demand.
-    check_coupling : bool, optional
-        Refuse a coupling gain above :data:`MAX_COUPLING_GAIN` (module notes).
+    options : CosimOptions, optional
+        Steps, travel, section, interface (default: ``CosimOptions()``).
     progress : callable, optional
         Called with a line of text about ten times per run.
+    **settings
+        Fields of :class:`CosimOptions` (e.g. ``time_step=2e-4``), each replacing the one of
+        `options`.
 
     Returns
     -------
     CosimulationResult
     """
-    from panto.build_fmu.stepping import FmuStepper
-
+    options = replace(options or CosimOptions(), **settings)
     say = progress or (lambda text: None)
     setup = pantograph_setup(pantograph) if isinstance(pantograph, str) else pantograph
     started = clock.perf_counter()
-    catenary = _catenary(line, time_step, element_length, damping, say)
+    catenary = _catenary(line, options.time_step, options.element_length, options.damping, say)
     definition = catenary.line
     speed = _checked_speed(speed_kmh, definition)
-    substeps, step = _communication(catenary.time_step, communication_step)
-    start, stop = _travel(catenary, start_position, stop_position)
-    section = _section(definition, section)
-    fmu_path = setup.resolve_fmu(fmu_cache, progress=say)
+    substeps, step = _communication(catenary.time_step, options.communication_step)
+    start, stop = _travel(catenary, options.start_position, options.stop_position)
+    section = _section(definition, options.section)
+    fmu_path = setup.resolve_fmu(options.fmu_cache, progress=say)
     offset = setup.eta_offset(definition.contact_wire_height)
-    stepper = FmuStepper(fmu_path, step_size=step, inputs=setup.input_names(),
-                         outputs=setup.output_names(), interface=interface,
-                         parameters=setup.fmu_parameters(definition.contact_wire_height,
-                                                         speed_kmh))
-    with stepper:
+    with _stepper(setup, fmu_path, step, options.interface, definition, speed_kmh) as stepper:
         catenary.reset()
         inputs = np.array([catenary.contact_wire_height(start) + offset]
                           + [value for _, value in setup.constant_inputs])
         stepper.initialise(inputs)
-        gain = _coupling_gain(catenary, stepper, inputs, step)
-        if check_coupling and gain > MAX_COUPLING_GAIN:
-            raise ValueError(f"coupling gain k_c H / Z = {gain:.2f} > {MAX_COUPLING_GAIN} at the "
-                             f"communication step {step:g} s: choose a smaller step")
+        gain = _checked_coupling_gain(catenary, stepper, inputs, step, options.check_coupling)
         setup_seconds = clock.perf_counter() - started
         say(f"co-simulating {definition.name} with {setup.name} at {speed_kmh:g} km/h "
             f"({(stop - start) / speed:.2f} s simulated, H = {step:g} s, gain {gain:.3f})")
         record, clocks, loop_seconds = _run(catenary, stepper, inputs, offset, start, stop,
                                             speed, substeps, bool(setup.head_output), say)
-    settings = {
+    run_settings = {
         "line": definition.name, "line_source": getattr(definition, "source", ""),
-        "pantograph": setup.to_dict(), "fmu": str(fmu_path), "interface": interface,
+        "pantograph": setup.to_dict(), "fmu": str(fmu_path), "interface": options.interface,
         "speed_kmh": float(speed_kmh), "time_step_s": catenary.time_step,
-        "communication_step_s": step, "element_length_m": getattr(catenary, "element_length",
-                                                                  element_length),
-        "damping": getattr(catenary, "damping", None if catenary is line else damping),
+        "communication_step_s": step, **_catenary_settings(catenary, line, options),
         "start_m": start, "stop_m": stop,
         "section_m": list(section), "eta_offset_m": offset, "coupling_gain": gain,
         "coupling": "explicit Gauss-Seidel, pantograph first, wire height held over a step"}
-    return _result(record, catenary, section, settings, clocks, setup_seconds, loop_seconds)
+    return _result(record, catenary, section, run_settings, clocks, setup_seconds, loop_seconds)
+
+
+def _stepper(setup: PantographSetup, fmu_path: Path, step: float, interface: str,
+             definition: Any, speed_kmh: float) -> Any:
+    """The FMU stepper of the run (its parameters set for the line's wire height and the speed)."""
+    from panto.build_fmu.stepping import FmuStepper
+
+    return FmuStepper(fmu_path, step_size=step, inputs=setup.input_names(),
+                      outputs=setup.output_names(), interface=interface,
+                      parameters=setup.fmu_parameters(definition.contact_wire_height, speed_kmh))
+
+
+def _catenary_settings(catenary: Any, line: Any, options: CosimOptions) -> dict[str, Any]:
+    """Element length and damping as used: the catenary's own, else as asked."""
+    return {"element_length_m": getattr(catenary, "element_length", options.element_length),
+            "damping": getattr(catenary, "damping",
+                               None if catenary is line else options.damping)}
 
 
 def _catenary(line: Any, time_step: float, element_length: float | None, damping: bool,
@@ -315,6 +345,16 @@ def _section(line: Any, section: tuple[float, float] | None) -> tuple[float, flo
     if not low < high:
         raise ValueError(f"the analysed section must have start < end, got {section!r}")
     return low, high
+
+
+def _checked_coupling_gain(catenary: Any, stepper: Any, inputs: np.ndarray, step: float,
+                           check: bool) -> float:
+    """The coupling gain; refused above :data:`MAX_COUPLING_GAIN` if `check`."""
+    gain = _coupling_gain(catenary, stepper, inputs, step)
+    if check and gain > MAX_COUPLING_GAIN:
+        raise ValueError(f"coupling gain k_c H / Z = {gain:.2f} > {MAX_COUPLING_GAIN} at the "
+                         f"communication step {step:g} s: choose a smaller step")
+    return gain
 
 
 def _coupling_gain(catenary: Any, stepper: Any, inputs: np.ndarray, step: float) -> float:
@@ -402,81 +442,5 @@ def _result(rec: dict[str, np.ndarray], catenary: Any, section: tuple[float, flo
         settings=settings, counters=counters, timing=timing, success=True, message=message)
 
 
-# --- plots --------------------------------------------------------------------------------------
-
-def _shade_section(ax: Any, result: CosimulationResult) -> None:
-    ax.axvspan(*result.section, color="tab:green", alpha=0.08, lw=0, label="analysed section")
-
-
-def plot_contact_force(result: CosimulationResult, path: str | Path) -> Path:
-    """Contact force along the line: raw, 20 Hz low-passed, mean and mean +- 3 sigma."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    stats = result.statistics()
-    settings = result.settings
-    fig, ax = plt.subplots(figsize=(11, 4.5), constrained_layout=True)
-    _shade_section(ax, result)
-    ax.plot(result.position, result.contact_force, color="0.7", lw=0.6, label="raw")
-    ax.plot(result.position, result.filtered_force(), color="tab:blue", lw=1.4,
-            label="low-pass 20 Hz")
-    for value, style, label in ((stats.mean, "-", f"mean {stats.mean:.1f} N"),
-                                (stats.stat_max, "--", f"mean ± 3σ ({stats.std:.1f} N)"),
-                                (stats.stat_min, "--", None)):
-        ax.hlines(value, *result.section, colors="tab:red", linestyles=style, label=label)
-    lost = result.contact_force <= 0.0
-    if lost.any():
-        ax.plot(result.position[lost], np.zeros(lost.sum()), "x", color="tab:red", ms=4,
-                label=f"contact loss ({stats.loss_pct:.2f} % in section)")
-    for x in result.support_positions:
-        ax.axvline(x, color="0.85", lw=0.6, zorder=0)
-    ax.set(xlabel="position along the line x [m] (grey lines: supports)",
-           ylabel="contact force [N]",
-           title=f"{settings.get('pantograph', {}).get('name', '')} on {settings.get('line')} "
-                 f"at {settings.get('speed_kmh', 0):g} km/h")
-    ax.legend(loc="upper right", ncol=3, fontsize=8)
-    summary = (f"section: mean {stats.mean:.1f} N, σ {stats.std:.1f} N\n"
-               f"max {stats.max:.1f} N, min {stats.min:.1f} N (20 Hz)\n"
-               f"uplift {stats.uplift_max_mm:.1f} mm, loss {stats.loss_pct:.2f} %")
-    ax.text(0.01, 0.97, summary, transform=ax.transAxes, va="top", fontsize=8,
-            bbox={"boxstyle": "round", "facecolor": "white", "alpha": 0.8})
-    # the run may end against a pinned line end (a force spike): keep the scale on the rest
-    top = 1.25 * max(stats.stat_max, float(np.quantile(result.contact_force, 0.995)))
-    ax.set_ylim(min(0.0, float(np.min(result.contact_force))) - 5.0, top)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return Path(path)
-
-
-def plot_uplift(result: CosimulationResult, path: str | Path) -> Path:
-    """Contact-wire uplift at the contact point along the line, and the maximum per support."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(11, 4.5), constrained_layout=True)
-    _shade_section(ax, result)
-    ax.plot(result.position, 1000.0 * (result.wire_height - result.static_wire_height),
-            color="tab:blue", lw=1.2, label="uplift of the wire under the pantograph")
-    peak = 1000.0 * result.support_uplift.max(axis=0)
-    ax.plot(result.support_positions, peak, "v", color="tab:red", ms=7,
-            label="maximum uplift at each support (steady arm)")
-    for x, value in zip(result.support_positions, peak):
-        ax.annotate(f"{value:.0f}", (x, value), textcoords="offset points", xytext=(0, 6),
-                    ha="center", fontsize=8, color="tab:red")
-    stats = result.statistics()
-    ax.set(xlabel="position along the line x [m]", ylabel="contact-wire uplift [mm]",
-           title=f"Contact-wire uplift (max at the supports of the section: "
-                 f"{stats.uplift_max_mm:.1f} mm)")
-    ax.axhline(0.0, color="0.5", lw=0.6)
-    ax.legend(loc="upper right", fontsize=8)
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-    return Path(path)
-
-
-__all__ = ["cosimulate", "CosimulationResult", "plot_contact_force", "plot_uplift",
+__all__ = ["cosimulate", "CosimOptions", "CosimulationResult",
            "DEFAULT_TIME_STEP", "MAX_COUPLING_GAIN"]

@@ -27,13 +27,15 @@ the line, speed and pantograph and how the sequence was made.
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .master import cosimulate
+from .master import CosimOptions, cosimulate
 from .pantographs import PantographSetup, pantograph_setup
+from .plots import plot_rig_sequence
 from .statistics import lowpass_filter
 
 #: Name of the value column the rig's signal generator reads.
@@ -92,28 +94,32 @@ def resample_periodic(displacement: np.ndarray, period: float, rate_hz: float) -
     return values - values.mean()
 
 
+#: Default run of :func:`make_rig_sequence`: a 0.2 ms catenary time step.
+RIG_SEQUENCE_OPTIONS = CosimOptions(time_step=2e-4)
+
+
 def make_rig_sequence(path: str | Path, *, line: str = "thesis-60m", speed_kmh: float = 300.0,
                       pantograph: PantographSetup | str | None = None,
-                      sample_rate_hz: float = 500.0, time_step: float = 2e-4,
-                      fmu_cache: str | Path | None = None,
-                      progress: Callable[[str], None] | None = None, **options: Any) -> Path:
+                      sample_rate_hz: float = 500.0, options: CosimOptions | None = None,
+                      progress: Callable[[str], None] | None = None, **settings: Any) -> Path:
     """Co-simulate and write the periodic rig sequence (module notes) to the CSV `path`.
 
-    `line` may be a name, a line file or a line definition; further keyword `options` go to
-    :func:`.master.cosimulate` (e.g. ``element_length``).
+    `line` may be a name, a line file or a line definition. The run's `options` default to
+    :data:`RIG_SEQUENCE_OPTIONS`; keyword `settings` replace its fields (e.g. ``time_step``,
+    ``element_length``, ``fmu_cache``), as in :func:`.master.cosimulate`.
 
     Returns
     -------
     pathlib.Path
         The CSV written (its metadata in ``<path>.json``: see
-        :func:`panto.fmu_src.response.metadata_path_for`).
+        :func:`panto.fmu_src.dataformat.metadata_path_for`).
     """
     from panto.fmu_src.response import TimeResponse
 
     setup = pantograph_setup("physical") if pantograph is None else (
         pantograph_setup(pantograph) if isinstance(pantograph, str) else pantograph)
-    result = cosimulate(line, setup, speed_kmh=speed_kmh, time_step=time_step,
-                        fmu_cache=fmu_cache, progress=progress, **options)
+    options = replace(options or RIG_SEQUENCE_OPTIONS, **settings)
+    result = cosimulate(line, setup, speed_kmh=speed_kmh, options=options, progress=progress)
     definition = _line_definition(line)
     first, last = definition.analysed_spans
     spans = [((k - 1) * definition.span_length, k * definition.span_length)
@@ -128,7 +134,7 @@ def make_rig_sequence(path: str | Path, *, line: str = "thesis-60m", speed_kmh: 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     response.to_csv(path)
-    _plot(path.with_suffix(".png"), time, values, period)
+    plot_rig_sequence(path.with_suffix(".png"), time, values, period)
     return path
 
 
@@ -159,21 +165,4 @@ def _metadata(line: Any, speed_kmh: float, setup: PantographSetup, period: float
     }
 
 
-def _plot(path: Path, time: np.ndarray, values: np.ndarray, period: float) -> None:
-    """Two periods, as thesis Fig. 3.4."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(8, 3.5), constrained_layout=True)
-    two = np.concatenate([time, time + period])
-    ax.plot(two, 1000.0 * np.tile(values, 2), color="tab:blue")
-    ax.axvline(period, color="0.6", lw=0.8, ls="--")
-    ax.set(xlabel="time [s]", ylabel="contact-wire displacement [mm]",
-           title=f"Rig excitation: two periods of {period:.2f} s")
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-
-
-__all__ = ["make_rig_sequence", "periodic_sequence", "resample_periodic", "COLUMN"]
+__all__ = ["make_rig_sequence", "RIG_SEQUENCE_OPTIONS", "periodic_sequence", "resample_periodic", "COLUMN"]

@@ -11,3 +11,18 @@
 - :mod:`~panto.fmu_src.spec`, :mod:`~panto.fmu_src.codegen`: what a model hands to the FMU builder, and
   its generated C code; ``runtime/`` holds the hand-written FMI 2.0/3.0 C runtime and solver.
 """
+
+from panto import lazy_exports
+
+# public names, imported on first use (importing the package stays cheap)
+__all__, __getattr__, __dir__ = lazy_exports(__name__, {
+    "Model": "models",
+    "default_parameters": "models",
+    "load_parameters": "models",
+    "ParameterSet": "parameters",
+    "ParameterError": "parameters",
+    "simulate_model": "simulation",
+    "SolverOptions": "simulation",
+    "TimeResponse": "response",
+    "DataFormatError": "dataformat",
+})

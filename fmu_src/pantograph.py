@@ -16,6 +16,7 @@ as candidate effects.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from functools import lru_cache
 from math import pi
 
@@ -163,15 +164,8 @@ def derive_pantograph() -> MechanicalModel:
     """
     kin = linkage()
     phi1, delta, phi2, phi3 = kin["phi1"], kin["delta"], kin["phi2"], kin["phi3"]
-    xi, dphi1, ddelta, dxi, eta, p = _symbols("xi dphi1 ddelta dxi eta p")
-    l1, l2, l3, l4 = _symbols("l1 l2 l3 l4")
-    m = _symbols("m1 m2 m3 m4")
-    m_c, g, k, k_c, k_ph, k_p = _symbols("m_c g k k_c k_ph k_p")
-    c1, c2, c3, c_c, unilateral = _symbols("c1 c2 c3 c_c unilateral_contact")
-    t_f, omega_eps, kappa_p, phi1_ref, k_c3 = _symbols("T_f omega_eps kappa_p phi1_ref k_c3")
-    lengths = (l1, l2, l3, l4)
+    xi, dphi1, ddelta, dxi = _symbols("xi dphi1 ddelta dxi")
     q, v = [phi1, delta, xi], [dphi1, ddelta, dxi]
-
     dependents = (
         Dependent(phi2, kin["phi2_expr"], {phi1: kin["S2"], delta: kin["D2"]}),
         Dependent(phi3, kin["phi3_expr"], {phi1: kin["S3"], delta: kin["D3"]}),
@@ -180,6 +174,19 @@ def derive_pantograph() -> MechanicalModel:
     def d(expression: sp.Expr, coordinate: sp.Symbol) -> sp.Expr:
         return total_derivative(expression, coordinate, dependents)
 
+    mass, potential = _mass_matrix_and_gravity(kin, q, d)
+    forces, contact, energy = _forces_and_energy(kin, q, v, mass, potential, d)
+    return _pantograph_model(kin, mass, forces, contact, energy, dependents)
+
+
+def _mass_matrix_and_gravity(kin: dict, q: list[sp.Symbol],
+                             d: Callable[[sp.Expr, sp.Symbol], sp.Expr],
+                             ) -> tuple[sp.Matrix, sp.Expr]:
+    """Mass matrix of the kinetic energy (2.22) and the potential of gravity."""
+    xi = q[2]
+    m = _symbols("m1 m2 m3 m4")
+    m_c, g = _symbols("m_c g")
+    lengths = _symbols("l1 l2 l3 l4")
     # Kinetic energy (2.22): T = 1/2 v^T M v with M = sum m J^T J + I w^T w (+ m_c for xi).
     mass = sp.zeros(3, 3)
     potential = m_c * g * xi
@@ -189,11 +196,20 @@ def derive_pantograph() -> MechanicalModel:
         mass += mi * jac.T * jac + (mi * li**2 / 12) * w.T * w  # (2.21)
         potential += mi * g * y
     mass[2, 2] += m_c
-    mass = mass.applyfunc(sp.expand)  # simple trigonometric polynomials in S2, S3, ...
+    return mass.applyfunc(sp.expand), potential  # simple trigonometric polynomials in S2, S3, ...
 
+
+def _forces_and_energy(kin: dict, q: list[sp.Symbol], v: list[sp.Symbol], mass: sp.Matrix,
+                       potential: sp.Expr, d: Callable[[sp.Expr, sp.Symbol], sp.Expr],
+                       ) -> tuple[sp.Matrix, sp.Expr, sp.Expr]:
+    """Right-hand side of the Euler-Lagrange equations (2.23), the contact force and the energy."""
+    (phi1, delta, xi), (dphi1, ddelta, dxi) = q, v
+    eta, p, k, k_c, k_ph, k_p = _symbols("eta p k k_c k_ph k_p")
+    c1, c2, c3, c_c, unilateral = _symbols("c1 c2 c3 c_c unilateral_contact")
+    t_f, omega_eps, kappa_p, phi1_ref, k_c3 = _symbols("T_f omega_eps kappa_p phi1_ref k_c3")
     y_cb = kin["y_cb"]
     dy_cb = sum(d(y_cb, qk) * vk for qk, vk in zip(q, v))
-    dphi2 = sum(d(phi2, qk) * vk for qk, vk in zip(q, v))
+    dphi2 = sum(d(kin["phi2"], qk) * vk for qk, vk in zip(q, v))
     stroke = xi - y_cb  # head suspension deflection
     potential += k * delta**2 / 2 + k_c * stroke**2 / 2 + k_c3 * stroke**4 / 4
     rayleigh = (c1 * dphi1**2 + c2 * ddelta**2 + c3 * dphi2**2 + c_c * (dxi - dy_cb) ** 2) / 2
@@ -212,6 +228,13 @@ def derive_pantograph() -> MechanicalModel:
     kinetic = (sp.Matrix(v).T * mass * sp.Matrix(v))[0, 0] / 2
     bellow_work = k_p * p * (phi1 + kappa_p * (phi1 - phi1_ref) ** 2 / 2)  # integral of the torque
     energy = kinetic + potential + k_ph * (xi - eta) ** 2 / 2 - bellow_work
+    return forces, contact, energy
+
+
+def _pantograph_model(kin: dict, mass: sp.Matrix, forces: sp.Matrix, contact: sp.Expr,
+                      energy: sp.Expr, dependents: tuple[Dependent, ...]) -> MechanicalModel:
+    """The derived equations as a :class:`MechanicalModel` with its outputs, guard and start."""
+    y_cb, xi, eta = kin["y_cb"], *_symbols("xi eta")
     return MechanicalModel(
         name="Pantograph",
         description="Physically based high-speed pantograph (four-bar linkage, flexible thrust "

@@ -7,15 +7,14 @@ It is immutable; methods that change something return a new response.
 
 Files a person can open: :meth:`TimeResponse.to_csv` writes a plain CSV whose header carries the
 units (``time [s],F_c [N],xi [1]``) and, when there is metadata, a JSON side file next to it;
-:meth:`TimeResponse.from_csv` reads both back. :meth:`TimeResponse.save_plot` writes a PNG/PDF/SVG.
+:meth:`TimeResponse.from_csv` reads both back (the format: :mod:`panto.fmu_src.dataformat`).
+:meth:`TimeResponse.save_plot` writes a PNG/PDF/SVG.
 
 The design follows python-control's ``TimeResponseData`` (named signals, ``to_pandas()``,
 ``plot()``), reduced to what a sampled, single-trajectory signal set needs.
 """
 from __future__ import annotations
 
-import json
-import re
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,22 +23,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from panto.fmu_src.dataformat import (TIME_NAME, TIME_UNIT, csv_header, csv_read_options,
+                                      format_csv_row, format_header, parse_header,
+                                      read_side_file, write_side_file)
+
 if TYPE_CHECKING:  # imported lazily at run time: pandas and matplotlib are slow to import
     import pandas
     from matplotlib.figure import Figure
-
-TIME_NAME = "time"
-TIME_UNIT = "s"
-_HEADER_PATTERN = re.compile(r"^(?P<name>.+?) \[(?P<unit>[^\[\]]*)\]$")
-
-
-def _round_trip_options() -> dict[str, str]:
-    """``read_csv`` options for exact floats: pandas >= 3 is exact by default (and deprecates
-    ``float_precision``), older versions need ``float_precision="round_trip"``."""
-    import pandas as pd
-
-    major = int(pd.__version__.split(".")[0])
-    return {} if major >= 3 else {"float_precision": "round_trip"}
 
 
 def _frozen_array(values: Any, what: str) -> np.ndarray:
@@ -52,41 +42,6 @@ def _frozen_array(values: Any, what: str) -> np.ndarray:
         raise ValueError(f"{what} must be one-dimensional, got shape {array.shape}")
     array.setflags(write=False)
     return array
-
-
-def format_header(name: str, unit: str) -> str:
-    """Column header for a signal: ``"F_c [N]"``, or just the name when the unit is empty."""
-    return f"{name} [{unit}]" if unit else name
-
-
-def parse_header(header: str) -> tuple[str, str]:
-    """Split a column header ``"F_c [N]"`` into ``("F_c", "N")``; no ``" [...]"`` means no unit.
-
-    Names may themselves contain brackets (``"q[1] [rad]"`` is ``("q[1]", "rad")``); the unit is
-    the last bracketed group preceded by one space.
-    """
-    header = header.strip()
-    match = _HEADER_PATTERN.match(header)
-    if match is None:
-        return header, ""
-    return match["name"], match["unit"]
-
-
-def _json_default(value: Any) -> Any:
-    """Convert what ``json`` cannot: numpy scalars and arrays, sets; anything else as text."""
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, (set, frozenset)):
-        return sorted(value, key=str)
-    return str(value)
-
-
-def metadata_path_for(csv_path: str | Path) -> Path:
-    """The JSON side file that holds a CSV's metadata: ``result.csv`` → ``result.csv.json``."""
-    csv_path = Path(csv_path)
-    return csv_path.with_name(csv_path.name + ".json")
 
 
 @dataclass(frozen=True, eq=False, repr=False)
@@ -245,7 +200,7 @@ class TimeResponse:
         (just ``name`` when the unit is unknown). Numbers are written with full precision, so
         :meth:`from_csv` restores them exactly; missing samples are empty cells. When
         `write_metadata` is true and there is metadata, it goes to the JSON side file
-        :func:`metadata_path_for` (``result.csv.json``).
+        :func:`~panto.fmu_src.dataformat.metadata_path_for` (``result.csv.json``).
 
         Parameters
         ----------
@@ -271,14 +226,12 @@ class TimeResponse:
         [90.0, 110.0]
         """
         path = Path(path)
-        frame = self.to_pandas()
-        frame.columns = [format_header(name, self.units[name]) for name in self.names]
-        frame.index.name = format_header(TIME_NAME, TIME_UNIT)
-        frame.to_csv(path, na_rep="")  # shortest repr: exact round trip
-        side_file = metadata_path_for(path)
+        columns = np.column_stack([self.time, *self.signals.values()])
+        with open(path, "w", encoding="utf-8", newline="") as stream:
+            stream.write(csv_header(self.names, self.units))
+            stream.writelines(format_csv_row(row) for row in columns.tolist())
         if write_metadata and self.metadata:
-            side_file.write_text(json.dumps(dict(self.metadata), indent=2, default=_json_default)
-                                 + "\n", encoding="utf-8")
+            write_side_file(path, dict(self.metadata))
         return path
 
     @classmethod
@@ -307,7 +260,7 @@ class TimeResponse:
 
         path = Path(path)
         try:
-            frame = pd.read_csv(path, **_round_trip_options())
+            frame = pd.read_csv(path, **csv_read_options())
         except pd.errors.EmptyDataError:
             raise ValueError(f"{path}: file is empty") from None
         if frame.shape[1] == 0:
@@ -327,13 +280,7 @@ class TimeResponse:
                 signals[name] = pd.to_numeric(frame[column]).to_numpy(dtype=float)
             except (TypeError, ValueError) as error:
                 raise ValueError(f"{path}: column {column!r} is not numeric ({error})") from None
-        metadata: dict[str, Any] = {}
-        side_file = metadata_path_for(path)
-        if side_file.is_file():
-            try:
-                metadata.update(json.loads(side_file.read_text(encoding="utf-8")))
-            except json.JSONDecodeError as error:
-                raise ValueError(f"{side_file}: not valid JSON ({error})") from None
+        metadata: dict[str, Any] = dict(read_side_file(path) or {})
         metadata["source"] = str(path)
         try:
             return cls(time=frame.iloc[:, 0].to_numpy(dtype=float), signals=signals,
@@ -512,5 +459,4 @@ def is_close(first: TimeResponse, second: TimeResponse, *, rtol: float = 1e-9,
                for name in first.names)
 
 
-__all__ = ["TimeResponse", "format_header", "parse_header", "metadata_path_for", "is_close",
-           "TIME_NAME", "TIME_UNIT"]
+__all__ = ["TimeResponse", "is_close"]

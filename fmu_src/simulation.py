@@ -6,13 +6,35 @@ every sample so that the kinks or steps of the inputs do not spoil the error con
 """
 from __future__ import annotations
 
-from typing import Mapping
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, Mapping
 
 import numpy as np
 from scipy.integrate import solve_ivp
 
 from panto.fmu_src.models import Model
 from panto.fmu_src.response import TimeResponse
+
+
+@dataclass(frozen=True, kw_only=True)
+class SolverOptions:
+    """Settings of :func:`scipy.integrate.solve_ivp` for :func:`simulate_model`.
+
+    Parameters
+    ----------
+    method : str
+        The default LSODA switches to an implicit method with the exact Jacobian where the
+        contact spring makes the problem stiff; explicit methods (RK23, RK45, DOP853) get none.
+    rtol : float
+        Relative tolerance.
+    atol : float
+        Absolute tolerance, in the units of the states.
+    """
+
+    method: str = "LSODA"
+    rtol: float = 1e-8
+    atol: float = 1e-10
 
 
 def simulate_model(
@@ -22,9 +44,7 @@ def simulate_model(
     *,
     initial_state: np.ndarray | None = None,
     interpolation: str = "linear",
-    method: str = "LSODA",
-    rtol: float = 1e-8,
-    atol: float = 1e-10,
+    solver: SolverOptions | None = None,
 ) -> TimeResponse:
     """Simulate a model on the Python path.
 
@@ -40,15 +60,15 @@ def simulate_model(
         Initial state x = [q; v]; by default the static equilibrium for the first input sample.
     interpolation : {"linear", "hold"}
         Inputs between samples: linear interpolation or zero-order hold.
-    method, rtol, atol
-        Passed to :func:`scipy.integrate.solve_ivp`. The default LSODA switches to an implicit
-        method with the exact Jacobian where the contact spring makes the problem stiff.
+    solver : SolverOptions, optional
+        Method and tolerances of :func:`scipy.integrate.solve_ivp` (default ``SolverOptions()``).
 
     Returns
     -------
     TimeResponse
         Outputs and states at ``time``.
     """
+    solver = solver or SolverOptions()
     time = np.asarray(time, dtype=float)
     if time.ndim != 1 or time.size < 2 or np.any(np.diff(time) <= 0):
         raise ValueError("time must be a strictly increasing 1-D array with at least two samples")
@@ -68,16 +88,22 @@ def simulate_model(
         def inputs_at(t, t0=t0, u0=u0, slope=slope):
             return u0 + (t - t0) * slope
 
-        jacobian = {} if method in ("RK23", "RK45", "DOP853") else {
-            "jac": lambda t, z: numeric.jacobians(p, z, inputs_at(t))[0]}
-        sol = solve_ivp(lambda t, z: numeric.derivatives(p, z, inputs_at(t)), (t0, time[k + 1]), x,
-                        method=method, rtol=rtol, atol=atol, **jacobian)
+        sol = _integrate(numeric, p, x, (t0, time[k + 1]), inputs_at, solver)
         if not sol.success:
             raise RuntimeError(f"{model.name}: integration failed at t = {time[k]:g} s ({sol.message})")
         x = sol.y[:, -1]
         states[k + 1] = x
         outputs[k + 1] = numeric.outputs(p, x, u[k + 1])
     return _response(model, time, u, states, outputs)
+
+
+def _integrate(numeric: Any, p: np.ndarray, x: np.ndarray, span: tuple[float, float],
+               inputs_at: Callable[[float], np.ndarray], solver: SolverOptions) -> Any:
+    """One :func:`scipy.integrate.solve_ivp` run over `span` from the state `x`."""
+    jacobian = {} if solver.method in ("RK23", "RK45", "DOP853") else {
+        "jac": lambda t, z: numeric.jacobians(p, z, inputs_at(t))[0]}
+    return solve_ivp(lambda t, z: numeric.derivatives(p, z, inputs_at(t)), span, x,
+                     method=solver.method, rtol=solver.rtol, atol=solver.atol, **jacobian)
 
 
 def _input_matrix(model: Model, inputs: Mapping[str, np.ndarray | float], n: int) -> np.ndarray:

@@ -14,3 +14,21 @@ never on each other:
 - :mod:`~panto.identification.diagnosis`: the sim-to-real gap: residual analysis, effect vocabulary,
   ranking, augmented refits, acceptance on withheld data, report and blind benchmark.
 """
+
+from panto import lazy_exports
+
+# public names, imported on first use (importing the package stays cheap)
+__all__, __getattr__, __dir__ = lazy_exports(__name__, {
+    "IdentificationData": "estimation.base",
+    "fit_percent": "estimation.base",
+    "load_identification_data": "data.loading",
+    "LoadOptions": "data.loading",
+    "pantograph_data": "data.datasets",
+    "fit_least_squares": "estimation.least_squares",
+    "identifier": "structures.registry",
+    "structure_names": "structures.registry",
+    "compare_structures": "estimation.comparison",
+    "design_pantograph_experiment": "design.pantograph",
+    "diagnose": "diagnosis.pipeline",
+    "DiagnosisOptions": "diagnosis.pipeline",
+})

@@ -9,9 +9,7 @@ import sys
 from pathlib import Path
 from typing import Callable
 
-
-def _say(line: str) -> None:
-    print(line, flush=True)
+from panto.console import say
 
 
 def run_build_fmu(args: argparse.Namespace) -> int:
@@ -19,10 +17,10 @@ def run_build_fmu(args: argparse.Namespace) -> int:
     from panto.build_fmu.project import build_project_fmus
 
     built = build_project_fmus(args.out, names=args.models or _all_fmus(),
-                               fmi_versions=args.fmi_version, progress=_say)
+                               fmi_versions=args.fmi_version, progress=say)
     failed = [b for b in built if b.problems]
     for b in failed:
-        _say(f"INVALID {b.path}: " + "; ".join(b.problems))
+        say(f"INVALID {b.path}: " + "; ".join(b.problems))
     return 1 if failed else 0
 
 
@@ -48,11 +46,11 @@ def run_linearise(args: argparse.Namespace) -> int:
         "A": lin.A.tolist(), "B": lin.B.tolist(), "C": lin.C.tolist(), "D": lin.D.tolist(),
     }
     for name, value in result["outputs"].items():
-        _say(f"{name:>6} = {value:.6g}")
-    _say("modes [Hz]: " + ", ".join(f"{f:.3f}" for f in lin.natural_frequencies_hz))
+        say(f"{name:>6} = {value:.6g}")
+    say("modes [Hz]: " + ", ".join(f"{f:.3f}" for f in lin.natural_frequencies_hz))
     if args.json:
         Path(args.json).write_text(json.dumps(result, indent=2))
-        _say(f"wrote {args.json}")
+        say(f"wrote {args.json}")
     return 0
 
 
@@ -61,7 +59,7 @@ def run_parameters(args: argparse.Namespace) -> int:
     from panto.fmu_src.models import default_parameters
 
     path = default_parameters(args.model).save(args.out)
-    _say(f"wrote {path}")
+    say(f"wrote {path}")
     return 0
 
 
@@ -69,7 +67,7 @@ def run_demo(args: argparse.Namespace) -> int:
     """The main job on the embedded defaults."""
     from panto.demo import run_demo as demo
 
-    demo(Path(args.out), quick=args.quick, progress=_say)
+    demo(Path(args.out), quick=args.quick, progress=say)
     return 0
 
 

@@ -1,4 +1,4 @@
-"""``panto compare`` and ``panto sensitivity`` (issue 6: thesis section 4.8 and Fig. 4.9).
+"""``panto compare`` and ``panto sensitivity`` (thesis section 4.8 and Fig. 4.9).
 
 * ``panto compare TRAIN VALIDATION [--structures ...] [--workers N] [--out FOLDER] [--json FILE]``
   fits every model structure on the training run, validates it on the validation run and prints
@@ -16,26 +16,27 @@ from contextlib import nullcontext
 from pathlib import Path
 from typing import Callable
 
-
-def _say(line: str) -> None:
-    print(line, flush=True)
+from panto.console import say
 
 
 def run_compare(args: argparse.Namespace) -> int:
     """Fit the structures on TRAIN, validate on VALIDATION, print and write the table."""
-    from panto.identification.estimation.comparison import compare_structures, plot_comparison, plot_validation
+    from panto.identification.estimation.comparison import compare_structures
+    from panto.identification.estimation.plots import plot_comparison, plot_validation
     from panto.identification.data.datasets import pantograph_data
+    from panto.identification.structures.registry import comparison_identifiers
 
     train = pantograph_data(args.train, rate=args.rate)
     validation = pantograph_data(args.validation, rate=args.rate)
-    _say(f"training {args.train}: {len(train)} samples at {1 / train.sample_period:.0f} Hz; "
-         f"validation {args.validation}: {len(validation)} samples")
+    say(f"training {args.train}: {len(train)} samples at {1 / train.sample_period:.0f} Hz; "
+        f"validation {args.validation}: {len(validation)} samples")
     pool = ProcessPoolExecutor(args.workers) if args.workers and args.workers > 1 \
         else nullcontext(None)
     with pool as executor:
-        table = compare_structures(train, validation, structures=args.structures or None,
-                                   executor=executor, progress=_say)
-    _say(table.to_markdown())
+        table = compare_structures(train, validation,
+                                   structures=comparison_identifiers(args.structures or None),
+                                   executor=executor, progress=say)
+    say(table.to_markdown())
     if args.out:
         folder = Path(args.out)
         folder.mkdir(parents=True, exist_ok=True)
@@ -45,20 +46,21 @@ def run_compare(args: argparse.Namespace) -> int:
         plot_comparison(table, folder / "comparison.png")
         plots = plot_validation(table, validation, folder)
         _save_parameters(table, folder)
-        _say(f"wrote {folder}/comparison.(md|csv|json|png) and {len(plots)} validation plots")
+        say(f"wrote {folder}/comparison.(md|csv|json|png) and {len(plots)} validation plots")
     if args.json:
         table.write_json(args.json)
-        _say(f"wrote {args.json}")
+        say(f"wrote {args.json}")
     return 0 if any(row.result is not None for row in table.rows) else 1
 
 
 def _save_parameters(table, folder: Path) -> None:
     """The physical structures' identified parameters as files the FMUs accept."""
     from panto.fmu_src.models import default_parameters
+    from panto.identification.structures.registry import parameter_set
 
     names = set(default_parameters("Pantograph").names)
     for row in table.rows:
-        if row.result is not None and row.structure.startswith("physical"):
+        if row.result is not None and parameter_set(row.structure) == "Pantograph":
             values = {k: v for k, v in row.result.parameters.items() if k in names}
             default_parameters("Pantograph").with_values(values).save(
                 folder / f"parameters_{row.structure}.json")
@@ -68,8 +70,8 @@ def run_sensitivity(args: argparse.Namespace) -> int:
     """Eigenvalues of the linearised model with each parameter scaled (thesis Fig. 4.9)."""
     from panto.fmu_src.models import default_parameters
     from panto.fmu_src.parameters import ParameterSet
-    from panto.identification.structures.sensitivity import (TABLE_4_1, eigenvalue_sensitivity,
-                                            plot_eigenvalue_sensitivity)
+    from panto.identification.structures.plots import plot_eigenvalue_sensitivity
+    from panto.identification.structures.sensitivity import TABLE_4_1, eigenvalue_sensitivity
 
     # The file is read against the pantograph's specs (units, bounds); whether the linkage
     # closes is checked by the linearisation itself (a clear error if it cannot).
@@ -78,17 +80,17 @@ def run_sensitivity(args: argparse.Namespace) -> int:
     result = eigenvalue_sensitivity(parameters, eta=args.eta, p=args.p,
                                     names=args.names or TABLE_4_1,
                                     factors=tuple(args.factors))
-    _say("modes [Hz]: " + ", ".join(f"{f:.3f}" for f in result.natural_frequencies_hz))
-    _say(result.to_markdown())
+    say("modes [Hz]: " + ", ".join(f"{f:.3f}" for f in result.natural_frequencies_hz))
+    say(result.to_markdown())
     for shift in result.shifts:
         if shift.message:
-            _say(f"{shift.name}: {shift.message}")
+            say(f"{shift.name}: {shift.message}")
     if args.out:
         plot_eigenvalue_sensitivity(result, args.out)
-        _say(f"wrote {args.out}")
+        say(f"wrote {args.out}")
     if args.json:
         result.write_json(args.json)
-        _say(f"wrote {args.json}")
+        say(f"wrote {args.json}")
     return 0
 
 

@@ -1,4 +1,4 @@
-"""``panto cosim``: pantograph FMU against a finite-difference catenary (issue 3).
+"""``panto cosim``: pantograph FMU against a finite-difference catenary.
 
 One subcommand with four jobs:
 
@@ -17,9 +17,7 @@ import json
 from pathlib import Path
 from typing import Callable
 
-
-def _say(line: str) -> None:
-    print(line, flush=True)
+from panto.console import say
 
 
 def _setup(args: argparse.Namespace):
@@ -37,7 +35,7 @@ def _print_statistics(statistics: dict[str, float]) -> None:
     from panto.catenary_cosim.validation import LABELS
 
     for key, value in statistics.items():
-        _say(f"  {LABELS[key]:<32} {value:10.2f}")
+        say(f"  {LABELS[key]:<32} {value:10.2f}")
 
 
 def run_cosim(args: argparse.Namespace) -> int:
@@ -45,8 +43,8 @@ def run_cosim(args: argparse.Namespace) -> int:
     if args.build_catenary_fmu:
         from panto.catenary_cosim.catenary_fmu import build_catenary_fmu
 
-        _say(f"wrote {build_catenary_fmu(args.build_catenary_fmu)} (needs Python with the "
-             "panto package on the importing side)")
+        say(f"wrote {build_catenary_fmu(args.build_catenary_fmu)} (needs Python with the "
+            "panto package on the importing side)")
         return 0
     if args.rig_sequence:
         from panto.catenary_cosim.rig_sequence import make_rig_sequence
@@ -54,8 +52,8 @@ def run_cosim(args: argparse.Namespace) -> int:
         path = make_rig_sequence(args.rig_sequence, line=args.line or "thesis-60m",
                                  speed_kmh=args.speed or 300.0,
                                  pantograph=_setup(args) if args.pantograph or args.fmu
-                                 else None, fmu_cache=args.fmu_cache, progress=_say)
-        _say(f"wrote {path} and {path.name}.json")
+                                 else None, fmu_cache=args.fmu_cache, progress=say)
+        say(f"wrote {path} and {path.name}.json")
         return 0
     if args.validate_en50318:
         return _validate(args)
@@ -70,8 +68,8 @@ def _validate(args: argparse.Namespace) -> int:
     report = validate_en50318(args.out, time_step=args.time_step,
                               element_length=args.element_length or 0.25,
                               with_sensitivity=not args.no_sensitivity,
-                              fmu_cache=args.fmu_cache, progress=_say)
-    _say(report.markdown.read_text().split("## ")[0])
+                              fmu_cache=args.fmu_cache, progress=say)
+    say(report.markdown.read_text().split("## ")[0])
     return 0 if report.all_inside else 1
 
 
@@ -83,26 +81,26 @@ def _run(args: argparse.Namespace) -> int:
     result = cosimulate(args.line or "en50318-2002", _setup(args), speed_kmh=args.speed,
                         time_step=args.time_step, communication_step=args.communication_step,
                         element_length=args.element_length, damping=not args.no_damping,
-                        interface=args.interface, fmu_cache=args.fmu_cache, progress=_say)
+                        interface=args.interface, fmu_cache=args.fmu_cache, progress=say)
     statistics = result.statistics().to_dict()
-    _say(f"{result.message}; {result.timing['simulated_seconds_per_wall_second']:.2f} "
-         "simulated s per wall s")
-    _say("EN 50318 statistics over the analysed section:")
+    say(f"{result.message}; {result.timing['simulated_seconds_per_wall_second']:.2f} "
+        "simulated s per wall s")
+    say("EN 50318 statistics over the analysed section:")
     _print_statistics(statistics)
     if args.out:
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)
         stem = f"{result.settings['line']}_{args.speed:g}kmh"
-        _say(f"wrote {result.to_csv(out / f'{stem}.csv', every=args.csv_every)}")
+        say(f"wrote {result.to_csv(out / f'{stem}.csv', every=args.csv_every)}")
         for path in result.save_plots(out, stem=stem):
-            _say(f"wrote {path}")
+            say(f"wrote {path}")
     if args.json:
         document = {**statistics, "settings": result.settings, "counters": result.counters,
                     "timing": result.timing, "statistics_details": result.statistics().details(),
                     "message": result.message}
         Path(args.json).parent.mkdir(parents=True, exist_ok=True)
         Path(args.json).write_text(json.dumps(document, indent=2, default=str) + "\n")
-        _say(f"wrote {args.json}")
+        say(f"wrote {args.json}")
     return 0
 
 

@@ -1,11 +1,12 @@
-"""``panto doe``: design the next rig run (thesis chapter 5, issue 7).
+"""``panto doe``: design the next rig run (thesis chapter 5 and the pantograph rig's designs).
 
 * ``panto doe --model physical-linear [--parameters FILE] [--free ...] [--duration 60]
   [--criterion D|A|E] [--population N --generations N] [--out FOLDER] [--json FILE]``: the
   optimal motor position and pressure demand for the structure's free parameters, written as a
   rig profile (JSON + CSV table, checked by the profile loader), the predicted covariance table
   (designed vs the APRBS training profile of equal length) and plots
-  (:mod:`panto.identification.design.pantograph`, :mod:`panto.identification.design.profiles`).
+  (:mod:`panto.identification.design.constraints`, :mod:`panto.identification.design.pantograph`,
+  :mod:`panto.identification.design.profiles`).
 * ``--discriminate EFFECT`` (``F_f1``: friction on the two-mass oscillator's lower mass;
   ``T_f``: hinge friction in the nonlinear pantograph FMU): the input that makes the effect
   show (T-optimality, :mod:`panto.identification.design.discrimination`), exported the same way.
@@ -19,9 +20,7 @@ import json
 from collections.abc import Callable
 from pathlib import Path
 
-
-def _say(line: str) -> None:
-    print(line, flush=True)
+from panto.console import say
 
 
 def register(add: Callable) -> None:
@@ -99,13 +98,14 @@ def run_doe(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     if args.thesis_example:
         return _thesis_example(out)
-    from panto.identification.design.pantograph import DesignOptions, RigInputConstraints
+    from panto.identification.design.constraints import RigInputConstraints
+    from panto.identification.design.pantograph import DesignOptions
 
     constraints = RigInputConstraints.from_rig(minimum_contact_force=args.minimum_contact_force)
     n_samples = int(round(args.duration / constraints.sample_period))
     model = _model(args, constraints, n_samples)
-    _say(f"{model.structure_name}: designing for {list(model.parameter_names)}, "
-         f"{args.duration} s, rig limits {constraints}")
+    say(f"{model.structure_name}: designing for {list(model.parameter_names)}, "
+        f"{args.duration} s, rig limits {constraints}")
     if args.discriminate:
         return _discriminate(args, model, constraints, out)
     from panto.identification.design.pantograph import design_pantograph_experiment
@@ -114,12 +114,12 @@ def run_doe(args: argparse.Namespace) -> int:
     options = DesignOptions(population=args.population or 40,
                             generations=args.generations or 150, seed=args.seed)
     design = design_pantograph_experiment(model, constraints, criterion=args.criterion,
-                                          options=options, progress=_say)
+                                          options=options, progress=say)
     paths = write_design_report(design, out)
-    _say(f"{'parameter':>10} {'value':>12} {'std designed':>14} {'std APRBS':>12} {'ratio':>7}")
+    say(f"{'parameter':>10} {'value':>12} {'std designed':>14} {'std APRBS':>12} {'ratio':>7}")
     for row in design.covariance_table():
-        _say(f"{row['parameter']:>10} {row['value']:12.5g} {row['std_designed']:14.4g} "
-             f"{row['std_conventional']:12.4g} {row['ratio_conventional_to_designed']:7.2f}")
+        say(f"{row['parameter']:>10} {row['value']:12.5g} {row['std_designed']:14.4g} "
+            f"{row['std_conventional']:12.4g} {row['ratio_conventional_to_designed']:7.2f}")
     return _finish(args, design.summary(), paths)
 
 
@@ -131,14 +131,14 @@ def _discriminate(args, model, constraints, out: Path) -> int:
     options = DesignOptions(population=args.population or 12,
                             generations=args.generations or 15, seed=args.seed)
     effect = EffectModel(args.discriminate, model, args.effect_size)
-    design = design_discrimination(effect, constraints, options=options, progress=_say)
+    design = design_discrimination(effect, constraints, options=options, progress=say)
     profile, table = write_design_profile(
         design.motor_position, design.pressure_demand, constraints, out,
         name=f"discriminate_{args.discriminate}",
         notes=f"T-optimal input to detect {args.discriminate} = {effect.value} (panto doe)")
     summary = design.summary()
-    _say(f"T criterion: designed {summary['T_designed']:.4g}, APRBS "
-         f"{summary['T_conventional']:.4g} (ratio {summary['ratio']:.2f})")
+    say(f"T criterion: designed {summary['T_designed']:.4g}, APRBS "
+        f"{summary['T_conventional']:.4g} (ratio {summary['ratio']:.2f})")
     (out / "discrimination_summary.json").write_text(json.dumps(summary, indent=2, default=float)
                                                      + "\n")
     return _finish(args, summary, {"profile": profile, "table": table})
@@ -146,10 +146,10 @@ def _discriminate(args, model, constraints, out: Path) -> int:
 
 def _finish(args, summary: dict, paths: dict) -> int:
     for name, path in paths.items():
-        _say(f"wrote {name}: {path}")
+        say(f"wrote {name}: {path}")
     if args.json:
         Path(args.json).write_text(json.dumps(summary, indent=2, default=float) + "\n")
-        _say(f"wrote {args.json}")
+        say(f"wrote {args.json}")
     return 0
 
 
@@ -157,9 +157,9 @@ def _thesis_example(out: Path) -> int:
     from panto.identification.design.thesis_example import run_thesis_example
     from panto.identification.design.plots import plot_line_designs, plot_thesis_example
 
-    example = run_thesis_example(progress=_say)
+    example = run_thesis_example(progress=say)
     paths = [plot_line_designs(out / "doe_line.png"), *plot_thesis_example(example, out),
              *example.write(out)]
     for path in paths:
-        _say(f"wrote {path}")
+        say(f"wrote {path}")
     return 0

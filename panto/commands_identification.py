@@ -1,4 +1,4 @@
-"""``panto identify``: fit a model structure to a rig run (issue 6, thesis chapter 4).
+"""``panto identify``: fit a model structure to a rig run (thesis chapter 4).
 
 ``panto identify RUN --model physical-linear [--validate RUN] [--free a b] [--fix k_ph=50000]
 [--method lm|nsga2] [--multistart N] [--workers N] [--out DIR] [--json FILE] [--rate 50]
@@ -13,9 +13,7 @@ import math
 from pathlib import Path
 from typing import Callable
 
-
-def _say(line: str) -> None:
-    print(line, flush=True)
+from panto.console import say
 
 
 def _fixed(items: list[str] | None) -> dict[str, float]:
@@ -41,7 +39,7 @@ def _executor(workers: int):
 
 def run_identify(args: argparse.Namespace) -> int:
     """Load the runs, fit, print, write."""
-    from panto.identification.estimation.base import identifier
+    from panto.identification.structures.registry import identifier, parameter_set
     from panto.identification.data.datasets import pantograph_data
     from panto.identification.estimation.reporting import write_identification
 
@@ -63,11 +61,11 @@ def run_identify(args: argparse.Namespace) -> int:
             import numpy as np
 
             options["rng"] = np.random.default_rng(args.seed)
-    _say(f"identify {args.model} on {args.dataset}: {len(data)} samples at "
-         f"{1.0 / data.sample_period:g} Hz")
+    say(f"identify {args.model} on {args.dataset}: {len(data)} samples at "
+        f"{1.0 / data.sample_period:g} Hz")
     executor = _executor(args.workers)
     try:
-        result = identifier(args.model).identify(data, executor=executor, progress=_say,
+        result = identifier(args.model).identify(data, executor=executor, progress=say,
                                                  **options)
     finally:
         if executor is not None:
@@ -78,32 +76,35 @@ def run_identify(args: argparse.Namespace) -> int:
     elif args.out:
         nominal = _nominal(args.model)
         paths = write_identification(result, args.out, data=data, validation=validation,
-                                     nominal=nominal)
+                                     nominal=nominal, parameter_set=parameter_set(args.model))
         for path in paths.values():
-            _say(f"wrote {path}")
+            say(f"wrote {path}")
     if args.json:
         from panto.identification.estimation.reporting import result_summary
 
         summary = result_summary(result, data=data, validation=validation)
         Path(args.json).write_text(json.dumps(summary, indent=2, default=str) + "\n")
-        _say(f"wrote {args.json}")
+        say(f"wrote {args.json}")
     return 0 if result.success else 1
 
 
 def _write_collector_head(data, folder: Path) -> None:
     """The head's PT2 fits (eqs. 4.15/4.16) as JSON and their Bode plot against the H1 estimate."""
-    from panto.identification.structures.collector_head import identify_collector_head, plot_collector_head
+    from panto.identification.structures.collector_head import identify_collector_head
+    from panto.identification.structures.plots import plot_collector_head
 
     folder.mkdir(parents=True, exist_ok=True)
     head = identify_collector_head(data)
     (folder / "result.json").write_text(json.dumps(head.to_dict(), indent=2, default=str) + "\n")
     plot_collector_head(head, folder / "bode.png")
-    _say(f"wrote {folder / 'result.json'}")
-    _say(f"wrote {folder / 'bode.png'}")
+    say(f"wrote {folder / 'result.json'}")
+    say(f"wrote {folder / 'bode.png'}")
 
 
 def _nominal(model: str) -> dict[str, float] | None:
-    if model in ("physical", "physical-linear"):
+    from panto.identification.structures.registry import parameter_set
+
+    if parameter_set(model) == "Pantograph":
         from panto.identification.structures.physical import PhysicalLinear
 
         return PhysicalLinear().nominal()
@@ -112,19 +113,19 @@ def _nominal(model: str) -> dict[str, float] | None:
 
 def _print_result(result, validation) -> None:
     nominal = _nominal(result.structure) or {}
-    _say(f"{'parameter':>10} {'value':>12} {'std':>10} {'nominal':>12}")
+    say(f"{'parameter':>10} {'value':>12} {'std':>10} {'nominal':>12}")
     for name in result.free:
         value, std = result.parameters[name], result.std.get(name, math.nan)
-        _say(f"{name:>10} {value:12.5g} {std:10.3g} {nominal.get(name, math.nan):12.5g}")
-    _say("fit on training: " + ", ".join(f"{k} {v:.1f} %" for k, v in result.fit.items()))
+        say(f"{name:>10} {value:12.5g} {std:10.3g} {nominal.get(name, math.nan):12.5g}")
+    say("fit on training: " + ", ".join(f"{k} {v:.1f} %" for k, v in result.fit.items()))
     if validation is not None:
         fits = result.fit_on(validation, [o for o in result.fit if o in validation.output_names])
-        _say("fit on validation: " + ", ".join(f"{k} {v:.1f} %" for k, v in fits.items()))
+        say("fit on validation: " + ", ".join(f"{k} {v:.1f} %" for k, v in fits.items()))
     weak = (result.details.get("identifiability") or {}).get("not_identifiable") or {}
     for name, why in weak.items():
-        _say(f"not identifiable: {name}: {why}")
-    _say(f"{'' if result.success else 'FAILED: '}{result.message} "
-         f"({result.n_evaluations} evaluations, {result.wall_time:.1f} s)")
+        say(f"not identifiable: {name}: {why}")
+    say(f"{'' if result.success else 'FAILED: '}{result.message} "
+        f"({result.n_evaluations} evaluations, {result.wall_time:.1f} s)")
 
 
 def register(add: Callable[..., argparse.ArgumentParser]) -> None:

@@ -1,4 +1,4 @@
-"""``panto rig``: the rig sidecar and the virtual test bed (issue 4).
+"""``panto rig``: the rig sidecar and the virtual test bed (thesis chapter 3).
 
 ``panto rig run PROFILE`` plays a profile on the virtual test bed (default) or on a real rig
 (``--interface``/``--channel`` for the CAN bus and ``--io MODULE:FACTORY`` for the analogue I/O);
@@ -14,9 +14,7 @@ import json
 from pathlib import Path
 from typing import Callable
 
-
-def _say(line: str) -> None:
-    print(line, flush=True)
+from panto.console import say
 
 
 def _imperfections(text: str):
@@ -40,7 +38,7 @@ def _pantograph_fmu(args: argparse.Namespace) -> Path:
         return Path(args.fmu)
     from panto.build_fmu.project import project_fmu
 
-    return project_fmu("Pantograph", progress=_say)
+    return project_fmu("Pantograph", progress=say)
 
 
 def run_rig_run(args: argparse.Namespace) -> int:
@@ -68,15 +66,15 @@ def run_rig_run(args: argparse.Namespace) -> int:
         result = run_virtual_profile_realtime(
             profile, fmu_path=_pantograph_fmu(args), folder=folder,
             imperfections=_imperfections(args.imperfections), seed=args.seed, options=options,
-            progress=_say)
+            progress=say)
     else:
         from panto.rig.virtual import run_virtual_profile
 
         result = run_virtual_profile(
             profile, fmu_path=_pantograph_fmu(args), folder=folder,
             imperfections=_imperfections(args.imperfections), seed=args.seed, options=options,
-            progress=_say)
-    _say(f"{result.samples} samples, {result.late_cycles} late cycles; status: {result.status}")
+            progress=say)
+    say(f"{result.samples} samples, {result.late_cycles} late cycles; status: {result.status}")
     return 0 if result.success else 1
 
 
@@ -101,7 +99,7 @@ def _run_on_rig(args: argparse.Namespace, profile, folder: Path, options):
                                 position_limits=(profile.limits.motor_min,
                                                  profile.limits.motor_max)) as driver:
         return run_profile(profile, driver=driver, io=factory(), clock=clock, folder=folder,
-                           options=options, progress=_say)
+                           options=options, progress=say)
 
 
 def run_rig_emulate(args: argparse.Namespace) -> int:
@@ -109,7 +107,7 @@ def run_rig_emulate(args: argparse.Namespace) -> int:
     from panto.rig.realtime import serve_emulator
 
     serve_emulator({"interface": args.interface, "channel": args.channel},
-                   fmu_path=_pantograph_fmu(args), duration=args.duration, progress=_say)
+                   fmu_path=_pantograph_fmu(args), duration=args.duration, progress=say)
     return 0
 
 
@@ -119,7 +117,7 @@ def run_rig_profile(args: argparse.Namespace) -> int:
 
     written = preview_profile(args.profile, out=Path(args.out))
     for path in written:
-        _say(f"wrote {path}")
+        say(f"wrote {path}")
     return 0
 
 
@@ -128,14 +126,14 @@ def run_rig_check(args: argparse.Namespace) -> int:
     from panto.rig.dataset import REQUIRED_CHANNELS, read_dataset
 
     data = read_dataset(args.dataset, required=() if args.any_channels else REQUIRED_CHANNELS)
-    _say(f"{args.dataset}: {len(data)} samples at {data.metadata.sample_rate:g} Hz, "
-         f"{data.time[-1] - data.time[0]:.3f} s, source {data.metadata.source}, "
-         f"status {data.metadata.status}")
+    say(f"{args.dataset}: {len(data)} samples at {data.metadata.sample_rate:g} Hz, "
+        f"{data.time[-1] - data.time[0]:.3f} s, source {data.metadata.source}, "
+        f"status {data.metadata.status}")
     for name in data.names:
         values = data[name]
-        _say(f"  {name:>16} [{data.units[name]}]  min {values.min():.6g}  max {values.max():.6g}")
+        say(f"  {name:>16} [{data.units[name]}]  min {values.min():.6g}  max {values.max():.6g}")
     for warning in data.warnings:
-        _say(f"  warning: {warning}")
+        say(f"  warning: {warning}")
     return 0
 
 

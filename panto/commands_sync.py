@@ -1,4 +1,4 @@
-"""``panto sync``, ``panto preprocess``, ``panto aliasing-check`` (issue 5; thesis 3.2 and 4.2).
+"""``panto sync``, ``panto preprocess``, ``panto aliasing-check`` (thesis 3.2 and 4.2).
 
 * ``panto sync RUN_FOLDER TRACK_CSV --out FOLDER [--json FILE] [--plot sync.png]
   [--min-confidence X]``: align a marker track with a 500 Hz run through the LED and write the
@@ -16,34 +16,32 @@ import json
 from pathlib import Path
 from typing import Callable
 
-
-def _say(line: str) -> None:
-    print(line, flush=True)
+from panto.console import say
 
 
 def run_sync(args: argparse.Namespace) -> int:
     """Synchronise and merge (module notes)."""
-    from panto.video_sync.merge import sync_and_merge
+    from panto.video_sync.merge import MergeOptions, sync_and_merge
 
-    result = sync_and_merge(args.run_folder, args.track_csv, args.out,
-                            interpolation=args.interpolation,
-                            min_confidence=args.min_confidence,
-                            min_peak_ratio=args.min_peak_ratio, min_overlap=args.min_overlap,
-                            min_led_quality=args.min_led_quality, plot=args.plot, progress=_say)
+    options = MergeOptions(interpolation=args.interpolation, min_confidence=args.min_confidence,
+                           min_peak_ratio=args.min_peak_ratio, min_overlap=args.min_overlap,
+                           min_led_quality=args.min_led_quality)
+    result = sync_and_merge(args.run_folder, args.track_csv, args.out, options=options,
+                            plot=args.plot, progress=say)
     sync = result.sync
     seconds = sync.shift / result.dataset.metadata.sample_rate
-    _say(f"shift {sync.shift} fine samples = {seconds:+.3f} s (lag {sync.lag} frames, phase "
-         f"{sync.phase})")
-    _say(f"confidence {sync.confidence:.3f} (second best {sync.second_best:.3f}, peak ratio "
-         f"{sync.peak_ratio:.2f}, tied shifts {sync.tied_shifts})")
-    _say(f"frames merged {result.frames_merged}, samples {len(result.dataset)}")
-    _say("gap samples: " + ", ".join(f"{m} {n}" for m, n in result.gap_samples.items()))
-    _say(f"wrote {result.path}" + (f" and {result.plot}" if result.plot else ""))
+    say(f"shift {sync.shift} fine samples = {seconds:+.3f} s (lag {sync.lag} frames, phase "
+        f"{sync.phase})")
+    say(f"confidence {sync.confidence:.3f} (second best {sync.second_best:.3f}, peak ratio "
+        f"{sync.peak_ratio:.2f}, tied shifts {sync.tied_shifts})")
+    say(f"frames merged {result.frames_merged}, samples {len(result.dataset)}")
+    say("gap samples: " + ", ".join(f"{m} {n}" for m, n in result.gap_samples.items()))
+    say(f"wrote {result.path}" + (f" and {result.plot}" if result.plot else ""))
     if args.json:
         summary = dict(result.dataset.metadata.extra["video_sync"])
         summary.update(merged_dataset=str(result.path), samples=len(result.dataset))
         Path(args.json).write_text(json.dumps(summary, indent=2) + "\n")
-        _say(f"wrote {args.json}")
+        say(f"wrote {args.json}")
     return 0
 
 
@@ -56,37 +54,38 @@ def run_preprocess(args: argparse.Namespace) -> int:
     out = resample_dataset(dataset, args.rate, stopband=args.stopband, passband=args.passband,
                            channels=args.channels)
     record = out.metadata.extra["preprocessing"][-1]
-    _say(f"{len(dataset)} samples at {dataset.metadata.sample_rate:g} Hz -> {len(out)} at "
-         f"{args.rate:g} Hz; filter: Butterworth order {record['filter']['order']}, pass band "
-         f"{record['filter']['passband_hz']:g} Hz, stop band {args.stopband:g} Hz, zero phase")
+    say(f"{len(dataset)} samples at {dataset.metadata.sample_rate:g} Hz -> {len(out)} at "
+        f"{args.rate:g} Hz; filter: Butterworth order {record['filter']['order']}, pass band "
+        f"{record['filter']['passband_hz']:g} Hz, stop band {args.stopband:g} Hz, zero phase")
     for name, count in record["nan_samples_from_gaps"].items():
-        _say(f"  {name}: {count} samples NaN (filter touched a gap)")
-    _say(f"wrote {out.write(args.out)}")
+        say(f"  {name}: {count} samples NaN (filter touched a gap)")
+    say(f"wrote {out.write(args.out)}")
     return 0
 
 
 def run_aliasing_check(args: argparse.Namespace) -> int:
     """Compare two runs' spectra; exit 1 when aliasing is suspected."""
-    from panto.identification.data.preprocessing import check_aliasing, plot_aliasing_check
+    from panto.identification.data.plots import plot_aliasing_check
+    from panto.identification.data.preprocessing import check_aliasing
     from panto.rig.dataset import read_dataset
 
     check = check_aliasing(read_dataset(args.run_a, required=()),
                            read_dataset(args.run_b, required=()), args.channel,
                            band_width=args.band_width, tolerance_db=args.tolerance_db)
     rates = " and ".join(f"{r:g} Hz" for r in check.rates)
-    _say(f"{args.channel} at {rates} (mutually prime: {'yes' if check.coprime else 'NO'}), "
-         f"compared up to {check.max_frequency:g} Hz in {check.relevant.sum()} relevant bands")
+    say(f"{args.channel} at {rates} (mutually prime: {'yes' if check.coprime else 'NO'}), "
+        f"compared up to {check.max_frequency:g} Hz in {check.relevant.sum()} relevant bands")
     if check.aliasing_suspected:
         for low, high, difference in check.where:
-            _say(f"  aliasing suspected in {low:g}-{high:g} Hz: spectra differ by "
-                 f"{difference:+.1f} dB")
+            say(f"  aliasing suspected in {low:g}-{high:g} Hz: spectra differ by "
+                f"{difference:+.1f} dB")
     else:
         worst = max(abs(check.band_difference[check.relevant]), default=0.0)
-        _say(f"  spectra agree (largest difference {worst:.2f} dB)")
-    _say(f"wrote {plot_aliasing_check(check, args.out)}")
+        say(f"  spectra agree (largest difference {worst:.2f} dB)")
+    say(f"wrote {plot_aliasing_check(check, args.out)}")
     if args.json:
         Path(args.json).write_text(json.dumps(check.summary(), indent=2) + "\n")
-        _say(f"wrote {args.json}")
+        say(f"wrote {args.json}")
     return 1 if check.aliasing_suspected else 0
 
 

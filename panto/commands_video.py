@@ -1,4 +1,4 @@
-"""``panto video``: the synthetic camera, the tracker's set-up and marker tracking (issue 5).
+"""``panto video``: the synthetic camera, the tracker's set-up and marker tracking.
 
 ``panto video render RUN_FOLDER --out VIDEO`` films a virtual run with the synthetic camera;
 ``panto video setup VIDEO --camera CAMERA_JSON --out setup.json`` (or from rough clicks:
@@ -12,9 +12,7 @@ import json
 from pathlib import Path
 from typing import Callable
 
-
-def _say(line: str) -> None:
-    print(line, flush=True)
+from panto.console import say
 
 
 def _pair(text: str, what: str) -> tuple[float, float]:
@@ -41,9 +39,9 @@ def run_video_render(args: argparse.Namespace) -> int:
 
     setup = CameraSetup() if args.scale == 1.0 else CameraSetup().reduced(args.scale)
     result = render_run(args.run_folder, args.out, setup=setup, codec=args.codec, rng=args.seed,
-                        duration=args.duration, progress=_say)
-    _say(f"wrote {result.path} ({result.frame_count} frames at {result.fps:g} fps, {args.codec}) "
-         f"and {result.camera_json}")
+                        duration=args.duration, progress=say)
+    say(f"wrote {result.path} ({result.frame_count} frames at {result.fps:g} fps, {args.codec}) "
+        f"and {result.camera_json}")
     return 0
 
 
@@ -63,7 +61,8 @@ def _scales(args: argparse.Namespace, names: list[str]):
 
 def run_video_setup(args: argparse.Namespace) -> int:
     """Write a tracker set-up from the camera's side file or from rough clicks."""
-    from panto.video_sync.setup import make_setup, plot_detection_steps, setup_from_camera
+    from panto.video_sync.plots import plot_detection_steps
+    from panto.video_sync.setup import make_setup, setup_from_camera
 
     if args.camera:
         setup = setup_from_camera(args.camera)
@@ -78,12 +77,12 @@ def run_video_setup(args: argparse.Namespace) -> int:
                            thresholds=thresholds, frame_index=args.frame)
     setup.save(args.out)
     for marker in setup.markers:
-        _say(f"{marker.name:>10}: region {list(marker.roi)}, colour "
-             f"{[round(c) for c in marker.colour]}, threshold {marker.threshold:.3f}, "
-             f"radius {marker.radius_px:.1f} px")
-    _say(f"wrote {args.out}")
+        say(f"{marker.name:>10}: region {list(marker.roi)}, colour "
+            f"{[round(c) for c in marker.colour]}, threshold {marker.threshold:.3f}, "
+            f"radius {marker.radius_px:.1f} px")
+    say(f"wrote {args.out}")
     if args.picture:
-        _say(f"wrote {plot_detection_steps(args.video, setup, args.frame, args.picture)}")
+        say(f"wrote {plot_detection_steps(args.video, setup, args.frame, args.picture)}")
     return 0
 
 
@@ -91,19 +90,19 @@ def run_video_track(args: argparse.Namespace) -> int:
     """Track the markers and read the LED; write the track file."""
     from panto.video_sync.tracking import TrackerSetup, track_video
 
-    result = track_video(args.video, TrackerSetup.load(args.setup), progress=_say)
+    result = track_video(args.video, TrackerSetup.load(args.setup), progress=say)
     result.to_csv(args.out)
-    _say(f"{result.frame.size} frames; LED quality {result.led_separation:.3f} "
-         f"(threshold {result.led_threshold:.3f})")
+    say(f"{result.frame.size} frames; LED quality {result.led_separation:.3f} "
+        f"(threshold {result.led_threshold:.3f})")
     for name, lost in result.lost_frames.items():
-        _say(f"  {name:>10}: {lost} lost frames")
-    _say(f"wrote {args.out}")
+        say(f"  {name:>10}: {lost} lost frames")
+    say(f"wrote {args.out}")
     if args.json:
         Path(args.json).write_text(json.dumps({
             "video": str(args.video), "frames": int(result.frame.size),
             "lost_frames": result.lost_frames, "led_quality": result.led_separation,
             "led_threshold": result.led_threshold}, indent=2))
-        _say(f"wrote {args.json}")
+        say(f"wrote {args.json}")
     return 0
 
 

@@ -21,13 +21,11 @@ TARGET_STATIC_FORCE = 120.0
 def identify_models(state: dict[str, Any], progress: Progress) -> dict:
     """Step 3: the comparison table, the physical model's parameter file, Pareto front and
     eigenvalue sensitivity."""
-    from panto.identification.estimation.comparison import (
-        compare_structures,
-        plot_comparison,
-        plot_validation,
-    )
+    from panto.identification.estimation.comparison import compare_structures
+    from panto.identification.estimation.plots import plot_comparison, plot_validation
     from panto.identification.data.datasets import pantograph_data
     from panto.identification.structures.physical import PhysicalLinear
+    from panto.identification.structures.registry import comparison_identifiers, parameter_set
     from panto.identification.estimation.reporting import write_identification
 
     out, settings = state["out"], state["settings"]
@@ -35,7 +33,8 @@ def identify_models(state: dict[str, Any], progress: Progress) -> dict:
     validation = pantograph_data(state["runs"]["validation"], rate=50.0)
     state["data"] = (train, validation)
     limit = {"max_evaluations": settings.max_evaluations} if settings.max_evaluations else {}
-    table = compare_structures(train, validation, structures=settings.structures,
+    table = compare_structures(train, validation,
+                               structures=comparison_identifiers(settings.structures),
                                progress=progress,
                                options={"physical-linear": limit} if limit else None)
     folder = out / "comparison"
@@ -52,7 +51,8 @@ def identify_models(state: dict[str, Any], progress: Progress) -> dict:
     structure = PhysicalLinear(outputs=validation.output_names)
     nominal = structure.nominal()
     paths = write_identification(result, out / "identification", data=train,
-                                 validation=validation, nominal=nominal)
+                                 validation=validation, nominal=nominal,
+                                 parameter_set=parameter_set(result.structure))
     state["identified"] = dict(result.parameters)
     state["parameter_file"] = paths["parameters"]
     nominal_fit = _fits(validation, structure.simulate(nominal, validation))
@@ -82,7 +82,8 @@ def _fits(data: Any, simulated: np.ndarray) -> dict[str, float]:
 
 def _pareto(structure: Any, train: Any, out: Any, settings: Any, progress: Progress) -> dict:
     """NSGA-II front of the two fits (thesis Fig. 4.7), its knee polished by LM."""
-    from panto.identification.estimation.genetic import fit_pareto, plot_pareto
+    from panto.identification.estimation.genetic import fit_pareto
+    from panto.identification.estimation.plots import plot_pareto
 
     if settings.pareto_population <= 0:
         return {"skipped": "population 0"}
@@ -107,10 +108,8 @@ def _text(fits: dict) -> str:
 
 def _sensitivity(result: Any, out: Any, progress: Progress) -> dict:
     """Eigenvalues of the identified model with each Table 4.1 parameter scaled (Fig. 4.9)."""
-    from panto.identification.structures.sensitivity import (
-        eigenvalue_sensitivity,
-        plot_eigenvalue_sensitivity,
-    )
+    from panto.identification.structures.plots import plot_eigenvalue_sensitivity
+    from panto.identification.structures.sensitivity import eigenvalue_sensitivity
 
     sensitivity = eigenvalue_sensitivity(result)
     plot_eigenvalue_sensitivity(sensitivity, out / "identification" / "eigenvalues.png")
@@ -124,14 +123,15 @@ def _sensitivity(result: Any, out: Any, progress: Progress) -> dict:
 def diagnose_gap(state: dict[str, Any], progress: Progress) -> dict:
     """Step 4: where the physical model misses on the withheld run, and how far the found
     effects close the gap."""
-    from panto.identification.diagnosis.pipeline import diagnose
+    from panto.identification.diagnosis.pipeline import DiagnosisOptions, diagnose
     from panto.identification.diagnosis.report import write_report
 
     out, settings = state["out"], state["settings"]
     train, validation = state["data"]
     limit = {"max_evaluations": settings.max_evaluations} if settings.max_evaluations else {}
-    result = diagnose(train, validation, structure="physical-linear",
-                      max_effects=settings.diagnosis_max_effects, progress=progress, **limit)
+    options = DiagnosisOptions(max_effects=settings.diagnosis_max_effects, **limit)
+    result = diagnose(train, validation, structure="physical-linear", options=options,
+                      progress=progress)
     paths = write_report(result, out / "diagnosis")
     closed = result.gap_closed()
     progress(f"verdict {result.verdict} {list(result.effects)}; validation fit " + ", ".join(
@@ -189,11 +189,8 @@ def _finite(value: float) -> float | None:
 def design_next_run(state: dict[str, Any], progress: Progress) -> dict:
     """Step 5: the D-optimal rig run for the physical model's parameters (thesis 5.5), as a
     rig profile, with the predicted covariance against the APRBS of equal length."""
-    from panto.identification.design.pantograph import (
-        DesignOptions,
-        RigInputConstraints,
-        design_pantograph_experiment,
-    )
+    from panto.identification.design.constraints import RigInputConstraints
+    from panto.identification.design.pantograph import DesignOptions, design_pantograph_experiment
     from panto.identification.design.profiles import write_design_report
     from panto.identification.design.pantograph_sensitivity import LinearisedPantograph
 

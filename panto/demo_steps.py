@@ -105,12 +105,10 @@ def _nominal_against_measured(out: Path, label: str, folder: Path, progress: Pro
 def plot_trajectories(t: np.ndarray, inputs: dict, zero: float, measured: dict, responses: dict,
                       *, title: str):
     """Inputs, measured outputs and the nominal FMUs' responses over time (one figure)."""
-    import matplotlib
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(4, 1, figsize=(11, 9), sharex=True)
+    fig = Figure(figsize=(11, 9))
+    axes = fig.subplots(4, 1, sharex=True)
     axes[0].plot(t, (inputs["eta"] - zero) * 1e3, color="k", lw=0.8)
     axes[0].set_ylabel("linear motor [mm]")
     axes[1].plot(t, inputs["p"], color="k", lw=0.8)

@@ -39,11 +39,8 @@ def write_overview(out: str | Path, panels: Sequence[tuple[str, str]] = PANELS,
     pathlib.Path or None
         The picture, or None when none of the panels exists.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
     import matplotlib.image as mpimg
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
     out = Path(out)
     found = [(out / path, title) for path, title in panels if (out / path).is_file()]
@@ -51,7 +48,8 @@ def write_overview(out: str | Path, panels: Sequence[tuple[str, str]] = PANELS,
         return None
     columns = 2 if len(found) > 1 else 1
     rows = -(-len(found) // columns)
-    figure, axes = plt.subplots(rows, columns, figsize=(8 * columns, 4.6 * rows), squeeze=False)
+    figure = Figure(figsize=(8 * columns, 4.6 * rows))
+    axes = figure.subplots(rows, columns, squeeze=False)
     for axis in axes.ravel():
         axis.axis("off")
     for axis, (path, title) in zip(axes.ravel(), found):
@@ -60,5 +58,4 @@ def write_overview(out: str | Path, panels: Sequence[tuple[str, str]] = PANELS,
     figure.tight_layout()
     target = out / name
     figure.savefig(target, dpi=90)
-    plt.close(figure)
     return target

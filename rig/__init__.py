@@ -14,3 +14,20 @@
   :mod:`~panto.rig.imperfections` (what a real rig adds), :mod:`~panto.rig.virtual` (a profile played
   on it and recorded).
 """
+
+from panto import lazy_exports
+
+# public names, imported on first use (importing the package stays cheap)
+__all__, __getattr__, __dir__ = lazy_exports(__name__, {
+    "read_dataset": "dataset",
+    "Dataset": "dataset",
+    "RunMetadata": "dataset",
+    "DatasetError": "dataset",
+    "load_profile": "profiles",
+    "run_profile": "session",
+    "RunOptions": "session",
+    "RigIO": "session",
+    "run_virtual_profile": "virtual",
+    "RigImperfections": "imperfections",
+    "LinearMotorDriver": "drive",
+})

@@ -3,7 +3,8 @@
 The rig records at 500 Hz (thesis section 4.2); a run is written as CSV (+ a JSON side file for
 units and metadata), as Parquet (metadata in the schema) or as a MATLAB .mat file (the thesis'
 format). All three round-trip bit-exactly (floats in CSV are written with ``repr``, the shortest
-text that reads back to the same double).
+text that reads back to the same double). The file format shared with simulation results (headers,
+side file, CSV rows, suffixes) is :mod:`panto.fmu_src.dataformat`.
 
 :data:`STANDARD_CHANNELS` fixes the rig's channel names, units and which may hold NaN (a missing
 drive reply, a laser dropout). Every reader runs :func:`check_dataset`, which refuses a malformed
@@ -25,13 +26,15 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from panto.fmu_src.response import format_header, metadata_path_for, parse_header
+from panto.fmu_src.dataformat import (DataFormatError, csv_header, csv_read_options,
+                                      data_suffix, format_csv_row, metadata_path_for, parse_header,
+                                      read_side_file, write_side_file)
 
 FORMAT = "panto-rig-dataset"
 VERSION = 1
 
 
-class DatasetError(ValueError):
+class DatasetError(DataFormatError):
     """A dataset or dataset file violates the schema; the message names file, channel, problem."""
 
 
@@ -234,10 +237,7 @@ class Dataset:
         """Write as ``.csv`` (+ ``.csv.json``), ``.parquet`` or ``.mat``, by the suffix."""
         path = Path(path)
         writers = {".csv": write_csv, ".parquet": write_parquet, ".mat": write_mat}
-        if path.suffix not in writers:
-            raise DatasetError(f"{path}: unknown dataset format {path.suffix!r}; use one of "
-                               f"{sorted(writers)}")
-        return writers[path.suffix](self, path)
+        return writers[_suffix(path)](self, path)
 
 
 def _frozen(values: Any, what: str) -> np.ndarray:
@@ -341,17 +341,6 @@ def _finish(time: Any, channels: Mapping[str, Any], units: Mapping[str, str],
 # --- CSV --------------------------------------------------------------------------------------
 
 
-def format_csv_row(values: Sequence[float]) -> str:
-    """One CSV line: shortest exact ``repr`` of each float, NaN as an empty cell."""
-    return ",".join("" if v != v else repr(float(v)) for v in values) + "\n"
-
-
-def csv_header(names: Sequence[str], units: Mapping[str, str]) -> str:
-    """The header line ``time [s],name [unit],...``."""
-    return ",".join([format_header("time", "s")]
-                    + [format_header(n, units[n]) for n in names]) + "\n"
-
-
 def write_csv(dataset: Dataset, path: str | Path) -> Path:
     """Write `dataset` as CSV and its units + metadata as the side file ``<path>.json``."""
     path = Path(path)
@@ -366,19 +355,9 @@ def write_csv(dataset: Dataset, path: str | Path) -> Path:
 def write_sidecar(path: Path, names: Sequence[str], units: Mapping[str, str],
                   metadata: RunMetadata) -> Path:
     """Write (atomically: temporary file, fsync, rename) the CSV's JSON side file."""
-    import os
-
-    side = metadata_path_for(path)
-    text = json.dumps({"format": FORMAT, "version": VERSION,
-                       "channels": [{"name": n, "unit": units[n]} for n in names],
-                       "metadata": metadata.to_dict()}, indent=2) + "\n"
-    temporary = side.with_name(side.name + ".tmp")
-    with open(temporary, "w", encoding="utf-8") as stream:
-        stream.write(text)
-        stream.flush()
-        os.fsync(stream.fileno())
-    os.replace(temporary, side)
-    return side
+    return write_side_file(path, {"format": FORMAT, "version": VERSION,
+                                  "channels": [{"name": n, "unit": units[n]} for n in names],
+                                  "metadata": metadata.to_dict()})
 
 
 def read_csv(path: str | Path, *, required: Sequence[str] = REQUIRED_CHANNELS,
@@ -415,9 +394,8 @@ def read_csv(path: str | Path, *, required: Sequence[str] = REQUIRED_CHANNELS,
             raise DatasetError(f"{path}: channel {name!r}: unit {units[name]!r} in the header "
                                f"but {unit!r} in {metadata_path_for(path).name}")
         units[name] = units.get(name) or unit
-    options = {} if int(pd.__version__.split(".")[0]) >= 3 else {"float_precision": "round_trip"}
     frame = pd.read_csv(io.StringIO(text), header=0, names=["time", *names],
-                        na_values=[""], keep_default_na=False, **options)
+                        na_values=[""], keep_default_na=False, **csv_read_options())
     columns = {}
     for name in ["time", *names]:
         column = frame[name]
@@ -433,12 +411,12 @@ def read_csv(path: str | Path, *, required: Sequence[str] = REQUIRED_CHANNELS,
 
 def _read_sidecar(path: Path) -> tuple[dict[str, str], dict[str, Any]]:
     side = metadata_path_for(path)
-    if not side.is_file():
-        raise DatasetError(f"{path}: metadata side file {side.name} is missing")
     try:
-        data = json.loads(side.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as error:
-        raise DatasetError(f"{side}: not valid JSON ({error})") from None
+        data = read_side_file(path)
+    except DataFormatError as error:
+        raise DatasetError(str(error)) from None
+    if data is None:
+        raise DatasetError(f"{path}: metadata side file {side.name} is missing")
     if not isinstance(data, dict) or data.get("format") != FORMAT:
         raise DatasetError(f"{side}: not a {FORMAT!r} side file")
     units = {c["name"]: c["unit"] for c in data.get("channels", [])}
@@ -567,9 +545,15 @@ def read_dataset(path: str | Path, *, required: Sequence[str] = REQUIRED_CHANNEL
     if path.is_dir():
         path = path / "run.csv"
     readers = {".csv": read_csv, ".parquet": read_parquet, ".mat": read_mat}
-    if path.suffix not in readers:
-        raise DatasetError(f"{path}: unknown dataset format {path.suffix!r}; use one of "
-                           f"{sorted(readers)}")
+    suffix = _suffix(path)
     if not path.is_file():
         raise DatasetError(f"{path}: no such dataset file")
-    return readers[path.suffix](path, required=required, convert_units=convert_units)
+    return readers[suffix](path, required=required, convert_units=convert_units)
+
+
+def _suffix(path: Path) -> str:
+    """The data file's suffix (:func:`panto.fmu_src.dataformat.data_suffix`) as a DatasetError."""
+    try:
+        return data_suffix(path)
+    except DataFormatError as error:
+        raise DatasetError(str(error)) from None

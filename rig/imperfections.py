@@ -15,7 +15,7 @@ from typing import Any, Mapping
 
 #: Where each default comes from.
 PROVENANCE: dict[str, str] = {
-    "bar_mass": "issue 4 / thesis ch. 3: aluminium bar of about 1.5 kg between force sensor and pantograph",
+    "bar_mass": "thesis ch. 3: aluminium bar of about 1.5 kg between force sensor and pantograph",
     "robot_compliance": "project choice: the thesis' linear motor sits on an industrial robot (Fig. 3.1), "
                         "no modal data given",
     "hinge_friction_torque": "project choice: joint friction is not in the thesis model",

@@ -21,11 +21,8 @@ def conditioned_command(profile: Profile) -> tuple[np.ndarray, np.ndarray]:
 
 def preview_profile(path: str | Path | Profile, *, out: str | Path) -> list[Path]:
     """Write ``<name>.csv`` (500 Hz demands, LED) and ``<name>.png`` (plot) into `out`."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     import pandas as pd
+    from matplotlib.figure import Figure
 
     profile = path if isinstance(path, Profile) else load_profile(path)
     rendered = render_profile(profile)
@@ -37,8 +34,8 @@ def preview_profile(path: str | Path | Profile, *, out: str | Path) -> list[Path
                           "led [1]": rendered.led})
     csv_path = out / f"{profile.name}.csv"
     table.to_csv(csv_path, index=False)
-    fig, axes = plt.subplots(3, 1, figsize=(11, 7), sharex=True,
-                             gridspec_kw={"height_ratios": [3, 2, 1]})
+    fig = Figure(figsize=(11, 7))
+    axes = fig.subplots(3, 1, sharex=True, gridspec_kw={"height_ratios": [3, 2, 1]})
     axes[0].plot(rendered.time, rendered.motor_demand * 1e3, lw=0.8, label="demand")
     axes[0].plot(stream_time, command * 1e3, lw=0.8, label="command (conditioned, 250 Hz)")
     for limit in (profile.limits.motor_min, profile.limits.motor_max):
@@ -55,5 +52,4 @@ def preview_profile(path: str | Path | Profile, *, out: str | Path) -> list[Path
     fig.tight_layout()
     png_path = out / f"{profile.name}.png"
     fig.savefig(png_path, dpi=110)
-    plt.close(fig)
     return [csv_path, png_path]

@@ -72,7 +72,7 @@ from panto.rig.drive import LinearMotorDriver, open_bus
 from panto.rig.drive_emulator import DriveEmulator, DriveParameters
 from panto.rig.imperfections import RigImperfections
 from panto.rig.profiles import Profile, ProfileStream
-from panto.rig.virtual import POSITION_LATENCY, TRUTH_FILE, plain_drive_parameters
+from panto.rig.virtual import TRUTH_FILE, emulator_run_options, plain_drive_parameters
 from panto.rig.session import RunOptions, RunResult, run_profile
 from panto.rig.testbed import PlantSample, VirtualTestBed
 
@@ -253,13 +253,11 @@ def realtime_interpreter(settings: RealtimeOptions) -> Iterator[None]:
 
 
 @contextlib.contextmanager
-def emulated_rig(bus: can.BusABC, *, fmu_path: str | Path, drive: DriveParameters,
-                 settings: RealtimeOptions, imperfections: RigImperfections | None = None,
-                 parameters: Mapping[str, float] | None = None, seed: int = 0,
-                 sample_period: float = 0.002, pressure: float = 4.0,
-                 node_id: int = DEFAULT_NODE_ID, keep_truth: bool = True,
+def emulated_rig(bus: can.BusABC, *, bed: VirtualTestBed, drive: DriveParameters,
+                 settings: RealtimeOptions, pressure: float = 4.0,
+                 node_id: int = DEFAULT_NODE_ID,
                  ) -> Iterator[tuple[SharedPlant, DriveEmulator, EmulatorThread]]:
-    """The drive emulator and the plant served on `bus` in real time inside the block.
+    """The drive emulator and the plant `bed` served on `bus` in real time inside the block.
 
     Yields ``(plant, emulator, thread)``; on exit the emulator thread is stopped and joined and
     the plant's FMU is released (not while the thread still runs). The bellow starts, and is
@@ -267,11 +265,8 @@ def emulated_rig(bus: can.BusABC, *, fmu_path: str | Path, drive: DriveParameter
     starts at 0. :func:`realtime_interpreter` applies inside the block.
     """
     wall = RealClock()
-    bed = VirtualTestBed(fmu_path, parameters=parameters, imperfections=imperfections, seed=seed,
-                         sample_period=sample_period)
     thread: EmulatorThread | None = None
     try:
-        bed.keep_truth = keep_truth
         bed.initialise(slider_position=0.0, pressure=pressure, start_time=wall.now())
         plant = SharedPlant(bed)
         emulator = DriveEmulator(bus, clock=wall, node_id=node_id, parameters=drive,
@@ -284,6 +279,16 @@ def emulated_rig(bus: can.BusABC, *, fmu_path: str | Path, drive: DriveParameter
     finally:
         if thread is None or not thread.alive:
             bed.close()
+
+
+def _test_bed(fmu_path: str | Path, imperfections: RigImperfections | None,
+              parameters: Mapping[str, float] | None, seed: int, sample_period: float,
+              keep_truth: bool) -> VirtualTestBed:
+    """The plant of an emulated rig (not yet initialised)."""
+    bed = VirtualTestBed(fmu_path, parameters=parameters, imperfections=imperfections, seed=seed,
+                         sample_period=sample_period)
+    bed.keep_truth = keep_truth
+    return bed
 
 
 def run_virtual_profile_realtime(profile: Profile, *, fmu_path: str | Path, folder: str | Path,
@@ -302,17 +307,8 @@ def run_virtual_profile_realtime(profile: Profile, *, fmu_path: str | Path, fold
 
     Parameters
     ----------
-    profile : Profile
-    fmu_path : str or pathlib.Path
-        The pantograph FMU used as the plant (``Pantograph.fmu``).
-    folder : str or pathlib.Path
-        Run folder (refused if it already holds a run).
-    imperfections : RigImperfections, optional
-        Default: the rig as the thesis describes it.
-    parameters : mapping, optional
-        The "true" pantograph's model parameters.
-    seed : int
-        Seed of the sensor noise.
+    profile, fmu_path, folder, imperfections, parameters, seed
+        As for :func:`panto.rig.virtual.run_virtual_profile`.
     drive : mapping, optional
         Overrides of :class:`panto.rig.drive_emulator.DriveParameters`, applied on top of
         :data:`REALTIME_DRIVE_SETTINGS` (or of the faithful defaults, see `realtime`).
@@ -347,31 +343,45 @@ def run_virtual_profile_realtime(profile: Profile, *, fmu_path: str | Path, fold
     thread: EmulatorThread | None = None
     with can.Bus(interface="virtual", channel=channel) as master_bus, \
             can.Bus(interface="virtual", channel=channel) as drive_bus:
-        rig = emulated_rig(drive_bus, fmu_path=fmu_path, drive=drive_settings, settings=settings,
-                           imperfections=imperfections, parameters=parameters, seed=seed,
-                           sample_period=1.0 / profile.sample_rate,
+        bed = _test_bed(fmu_path, imperfections, parameters, seed,
+                        sample_period=1.0 / profile.sample_rate, keep_truth=True)
+        rig = emulated_rig(drive_bus, bed=bed, drive=drive_settings, settings=settings,
                            pressure=profile.pressure.offset)
         try:
             with rig as (plant, _, thread):
-                driver = LinearMotorDriver(master_bus, clock=RealClock(),
-                                           reply_timeout_cycles=settings.reply_timeout_cycles,
-                                           position_limits=(profile.limits.motor_min,
-                                                            profile.limits.motor_max))
-                truth = {**plant.bed.truth_record(),
-                         "drive": plain_drive_parameters(drive_settings),
-                         "realtime": {"lenient_timing": settings.lenient_timing,
-                                      "reply_timeout_cycles": settings.reply_timeout_cycles}}
-                run_options = replace(options or RunOptions(), source="emulator", truth=truth,
-                                      rig_setup={"motor_zero_height": plant.bed.motor_zero_height,
-                                                 "position_latency": POSITION_LATENCY,
-                                                 **dict((options or RunOptions()).rig_setup)})
+                driver = _driver(master_bus, profile, settings)
+                truth = _realtime_truth(plant.bed, drive_settings, settings)
                 _warm_up(profile)
                 result = run_profile(profile, driver=driver, io=plant,
                                      clock=clock if clock is not None else RealClock(),
-                                     folder=folder, options=run_options, progress=progress)
+                                     folder=folder,
+                                     options=emulator_run_options(options, plant.bed, truth),
+                                     progress=progress)
         finally:  # once the thread has stopped, the plant's truth is complete
             if plant is not None and thread is not None and not thread.alive:
                 _write_truth(plant.bed, folder, result)
+    _check_thread(thread, folder, result)
+    return result
+
+
+def _driver(bus: can.BusABC, profile: Profile, settings: RealtimeOptions) -> LinearMotorDriver:
+    """The run loop's drive driver on `bus`, on a plain wall clock, within the profile's limits."""
+    return LinearMotorDriver(bus, clock=RealClock(),
+                             reply_timeout_cycles=settings.reply_timeout_cycles,
+                             position_limits=(profile.limits.motor_min, profile.limits.motor_max))
+
+
+def _realtime_truth(bed: VirtualTestBed, drive: DriveParameters,
+                    settings: RealtimeOptions) -> dict[str, Any]:
+    """The run's truth record: the plant's, the drive's parameters and the real-time settings."""
+    return {**bed.truth_record(), "drive": plain_drive_parameters(drive),
+            "realtime": {"lenient_timing": settings.lenient_timing,
+                         "reply_timeout_cycles": settings.reply_timeout_cycles}}
+
+
+def _check_thread(thread: EmulatorThread | None, folder: str | Path,
+                  result: RunResult | None) -> None:
+    """Raise the emulator thread's failure, noting where the run recorded up to then is."""
     try:
         if thread is not None:
             thread.check()
@@ -379,7 +389,6 @@ def run_virtual_profile_realtime(profile: Profile, *, fmu_path: str | Path, fold
         error.add_note(f"the run recorded up to then is in {folder}"
                        + (f" ({result.status})" if result else ""))
         raise
-    return result
 
 
 def _warm_up(profile: Profile) -> None:
@@ -431,14 +440,43 @@ class EmulationSummary:
                 f"{self.stopped_by}; drive state {self.main_state}, error 0x{self.error_code:02X}")
 
 
+@dataclass(frozen=True, kw_only=True)
+class EmulatorOptions:
+    """What :func:`serve_emulator` serves: the plant behind the drive, the drive, the reports.
+
+    Parameters
+    ----------
+    imperfections : RigImperfections or None
+        Default: the rig as the thesis describes it.
+    parameters : mapping or None
+        The "true" pantograph's model parameters.
+    seed : int
+        Seed of the sensor noise.
+    drive : mapping or None
+        Overrides of the drive parameters, on top of :data:`REALTIME_DRIVE_SETTINGS` unless
+        ``RealtimeOptions.lenient_timing`` is False.
+    pressure : float
+        Bellow pressure held during the session [bar].
+    node_id : int
+        The emulated drive's CANopen node id.
+    status_period : float
+        Seconds between progress lines [s].
+    """
+
+    imperfections: RigImperfections | None = None
+    parameters: Mapping[str, float] | None = None
+    seed: int = 0
+    drive: Mapping[str, Any] | None = None
+    pressure: float = 4.0
+    node_id: int = DEFAULT_NODE_ID
+    status_period: float = 10.0
+
+
 def serve_emulator(bus_or_config: can.BusABC | Mapping[str, Any], *, fmu_path: str | Path,
                    duration: float | None = None, stop_event: threading.Event | None = None,
                    progress: Callable[[str], None] | None = None,
-                   imperfections: RigImperfections | None = None,
-                   parameters: Mapping[str, float] | None = None, seed: int = 0,
-                   drive: Mapping[str, Any] | None = None, pressure: float = 4.0,
-                   node_id: int = DEFAULT_NODE_ID, realtime: RealtimeOptions | None = None,
-                   status_period: float = 10.0) -> EmulationSummary:
+                   options: EmulatorOptions | None = None,
+                   realtime: RealtimeOptions | None = None) -> EmulationSummary:
     """Serve the emulated rig's drive (and its plant) on a CAN bus in real time until stopped.
 
     What ``panto rig emulate`` does: an external master (``panto rig run`` in another process, or
@@ -449,9 +487,9 @@ def serve_emulator(bus_or_config: can.BusABC | Mapping[str, Any], *, fmu_path: s
 
     Only the drive is on the bus. The rig's analogue I/O (force, pressure and laser sensors, the
     valve voltage, the LED) are lines to its DAQ, not CAN frames, so an external master cannot
-    read or write them here: the bellow is held at `pressure`, and the plant's force and
-    pressure are only shown in the progress lines. For a complete emulated run in one process
-    use :func:`run_virtual_profile_realtime`.
+    read or write them here: the bellow is held at ``options.pressure``, and the plant's force
+    and pressure are only shown in the progress lines. For a complete emulated run in one
+    process use :func:`run_virtual_profile_realtime`.
 
     Parameters
     ----------
@@ -465,44 +503,36 @@ def serve_emulator(bus_or_config: can.BusABC | Mapping[str, Any], *, fmu_path: s
     stop_event : threading.Event, optional
         Set it (from another thread) to stop.
     progress : callable, optional
-        Receives a status line (drive state, slider position, force) every `status_period` s.
-    imperfections, parameters, seed
-        As for :func:`run_virtual_profile_realtime`.
-    drive : mapping, optional
-        Overrides of the drive parameters, on top of :data:`REALTIME_DRIVE_SETTINGS` unless
-        ``realtime.lenient_timing`` is False.
-    pressure : float
-        Bellow pressure held during the session [bar].
-    node_id : int
-        The emulated drive's CANopen node id.
+        Receives a status line (drive state, slider position, force) every
+        ``options.status_period`` s.
+    options : EmulatorOptions, optional
+        The plant, the drive and the reports (default: ``EmulatorOptions()``).
     realtime : RealtimeOptions, optional
-    status_period : float
-        Seconds between progress lines.
 
     Returns
     -------
     EmulationSummary
     """
-    if duration is not None and not (math.isfinite(duration) and duration > 0):
-        raise ValueError(f"duration must be a finite number > 0 s or None, got {duration!r}")
-    if not (math.isfinite(status_period) and status_period > 0):
-        raise ValueError(f"status_period must be a finite number > 0 s, got {status_period!r}")
+    options = options or EmulatorOptions()
+    _check_serving_times(duration, options.status_period)
     settings = realtime or RealtimeOptions()
-    drive_settings = drive_parameters(drive, lenient_timing=settings.lenient_timing)
+    drive_settings = drive_parameters(options.drive, lenient_timing=settings.lenient_timing)
     stop = stop_event if stop_event is not None else threading.Event()
-    with _bus(bus_or_config) as bus, emulated_rig(
-            bus, fmu_path=fmu_path, drive=drive_settings, settings=settings,
-            imperfections=imperfections, parameters=parameters, seed=seed, pressure=pressure,
-            node_id=node_id, keep_truth=False) as (plant, emulator, thread):
-        if progress:
-            progress(f"drive emulator node {node_id} serving on {bus.channel_info}; "
-                     f"bellow held at {pressure:g} bar" + ("" if duration is None else
-                                                           f"; for {duration:g} s"))
-        started = time.monotonic()
-        stopped_by = _wait_until_stopped(stop, started, duration, status_period, thread,
-                                         lambda: progress(_status_line(plant, emulator, started))
-                                         if progress else None)
-        seconds = time.monotonic() - started
+    with _bus(bus_or_config) as bus:
+        bed = _test_bed(fmu_path, options.imperfections, options.parameters, options.seed,
+                        sample_period=0.002, keep_truth=False)
+        with emulated_rig(bus, bed=bed, drive=drive_settings, settings=settings,
+                          pressure=options.pressure, node_id=options.node_id) \
+                as (plant, emulator, thread):
+            if progress:
+                progress(f"drive emulator node {options.node_id} serving on "
+                         f"{bus.channel_info}; bellow held at {options.pressure:g} bar"
+                         + ("" if duration is None else f"; for {duration:g} s"))
+            started = time.monotonic()
+            stopped_by = _wait_until_stopped(
+                stop, started, duration, options.status_period, thread,
+                lambda: progress(_status_line(plant, emulator, started)) if progress else None)
+            seconds = time.monotonic() - started
     thread.check()
     summary = EmulationSummary(seconds=seconds, stopped_by=stopped_by,
                                plant_samples=plant.samples, main_state=int(emulator.main_state),
@@ -511,6 +541,14 @@ def serve_emulator(bus_or_config: can.BusABC | Mapping[str, Any], *, fmu_path: s
     if progress:
         progress(summary.message)
     return summary
+
+
+def _check_serving_times(duration: float | None, status_period: float) -> None:
+    """Refuse a duration or a status period that is not a finite number > 0 s."""
+    if duration is not None and not (math.isfinite(duration) and duration > 0):
+        raise ValueError(f"duration must be a finite number > 0 s or None, got {duration!r}")
+    if not (math.isfinite(status_period) and status_period > 0):
+        raise ValueError(f"status_period must be a finite number > 0 s, got {status_period!r}")
 
 
 @contextlib.contextmanager

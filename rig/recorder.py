@@ -31,8 +31,9 @@ from types import TracebackType
 
 import numpy as np
 
+from panto.fmu_src.dataformat import csv_header, format_csv_row
 from panto.rig.dataset import (REQUIRED_CHANNELS, STANDARD_CHANNELS, DatasetError, RunMetadata,
-                         check_dataset, csv_header, format_csv_row, read_csv, write_sidecar)
+                               check_dataset, read_csv, write_sidecar)
 
 RUN_FILE = "run.csv"
 

@@ -230,12 +230,7 @@ def run_profile(profile: Profile, *, driver: LinearMotorDriver, io: RigIO, clock
         ``status`` is ``"complete"`` or ``"aborted: ..."``; the dataset is in `folder` either way.
     """
     options = options or RunOptions()
-    metadata = RunMetadata(sample_rate=profile.sample_rate, source=options.source,
-                           seed=profile.seed, profile=profile_to_dict(profile),
-                           notes=options.notes or profile.notes, truth=dict(options.truth),
-                           extra={"rig_setup": dict(options.rig_setup)} if options.rig_setup else {})
-    recorder = Recorder(folder, channels=RUN_CHANNELS, metadata=metadata,
-                        background=options.background_writer)
+    recorder = _recorder(profile, folder, options)
     loop = _Loop(profile, driver, io, clock, recorder, options)
     fault: RigError | None = None
     try:
@@ -252,18 +247,32 @@ def run_profile(profile: Profile, *, driver: LinearMotorDriver, io: RigIO, clock
         error.add_note(f"the run up to t = {loop.time:.3f} s is recorded in {folder}")
         raise
     loop.stop_drive()
-    reached = loop.settle() if fault is not None and loop.lateness else True
-    if fault is None:
-        status_path = recorder.finish(formats=options.formats)
-        status = "complete"
-    else:
-        reason = _fault_reason(fault, loop.time, reached, profile.limits.safe_pressure)
-        status_path = recorder.abort(reason, at=loop.time)
-        status = f"aborted: {reason}"
+    status, status_path = _end_recording(recorder, loop, fault, profile, options)
     if progress:
         progress(f"run {status}; data in {status_path}")
     return _result(Path(folder), status, recorder.rows_written, fault, loop.lateness, loop.dt,
                    loop.clock_origin)
+
+
+def _recorder(profile: Profile, folder: str | Path, options: RunOptions) -> Recorder:
+    """The run's recorder, its metadata filled from the profile and the options."""
+    metadata = RunMetadata(sample_rate=profile.sample_rate, source=options.source,
+                           seed=profile.seed, profile=profile_to_dict(profile),
+                           notes=options.notes or profile.notes, truth=dict(options.truth),
+                           extra={"rig_setup": dict(options.rig_setup)} if options.rig_setup else {})
+    return Recorder(folder, channels=RUN_CHANNELS, metadata=metadata,
+                    background=options.background_writer)
+
+
+def _end_recording(recorder: Recorder, loop: _Loop, fault: RigError | None, profile: Profile,
+                   options: RunOptions) -> tuple[str, Path]:
+    """Finish the recording (after a fault: settle the bellow, then abort it with the reason);
+    return the status and the path the recorder wrote it to."""
+    reached = loop.settle() if fault is not None and loop.lateness else True
+    if fault is None:
+        return "complete", recorder.finish(formats=options.formats)
+    reason = _fault_reason(fault, loop.time, reached, profile.limits.safe_pressure)
+    return f"aborted: {reason}", recorder.abort(reason, at=loop.time)
 
 
 def _fault_reason(fault: RigError, time: float, reached: bool, safe: float) -> str:

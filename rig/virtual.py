@@ -83,11 +83,7 @@ def run_virtual_profile(profile: Profile, *, fmu_path: str | Path, folder: str |
                                    position_limits=(profile.limits.motor_min,
                                                     profile.limits.motor_max))
         truth = {**bed.truth_record(), "drive": plain_drive_parameters(drive_parameters)}
-        run_options = replace(options or RunOptions(), source="emulator", truth=truth,
-                              background_writer=False,
-                              rig_setup={"motor_zero_height": bed.motor_zero_height,
-                                         "position_latency": POSITION_LATENCY,
-                                         **dict((options or RunOptions()).rig_setup)})
+        run_options = replace(emulator_run_options(options, bed, truth), background_writer=False)
         origin = 0.0
         try:
             result = run_profile(profile, driver=driver, io=bed, clock=clock, folder=folder,
@@ -97,6 +93,16 @@ def run_virtual_profile(profile: Profile, *, fmu_path: str | Path, folder: str |
         finally:  # the truth beside the run, also when it stopped early
             if Path(folder).is_dir() and not (Path(folder) / TRUTH_FILE).exists():
                 bed.truth_dataset(origin).write(Path(folder) / TRUTH_FILE)
+
+
+def emulator_run_options(options: RunOptions | None, bed: VirtualTestBed,
+                         truth: Mapping[str, Any]) -> RunOptions:
+    """`options` for a run on the emulator: its source, its `truth`, and the bed's rig set-up
+    (motor zero height, :data:`POSITION_LATENCY`) under the set-up already given."""
+    options = options or RunOptions()
+    return replace(options, source="emulator", truth=truth,
+                   rig_setup={"motor_zero_height": bed.motor_zero_height,
+                              "position_latency": POSITION_LATENCY, **dict(options.rig_setup)})
 
 
 def plain_drive_parameters(parameters: DriveParameters) -> dict[str, Any]:

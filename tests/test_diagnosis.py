@@ -12,7 +12,7 @@ from scipy import signal as sps
 
 from panto.identification.diagnosis.augmentations import AugmentedStructure, mode_response
 from panto.identification.estimation.base import IdentificationData, fit_percent
-from panto.identification.diagnosis.pipeline import diagnose
+from panto.identification.diagnosis.pipeline import DiagnosisOptions, diagnose
 from panto.identification.diagnosis.report import write_report
 from panto.identification.diagnosis.support import effective_samples
 from panto.identification.diagnosis.effects import SignalRoles
@@ -55,7 +55,8 @@ def _case(hidden=None, n=3000, **kw):
 
 def _run(train, validation, **options):
     lines = []
-    result = diagnose(train, validation, structure="linear-2", progress=lines.append, **options)
+    result = diagnose(train, validation, structure="linear-2", progress=lines.append,
+                      options=DiagnosisOptions(**options))
     return result, lines
 
 

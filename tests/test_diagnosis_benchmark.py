@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from panto.identification.diagnosis import pipeline as diagnosis_module
+from panto.identification.diagnosis.pipeline import DiagnosisOptions
 from panto.identification.diagnosis.benchmark import (LIBRARY_DRAW, OUTSIDE_DRAW, STRONG, BenchmarkCase,
                                                 BenchmarkResult, CaseOutcome, confusion_matrix,
                                                 draw_cases, gap_closed, run_case, score_outcomes)
@@ -95,8 +96,8 @@ def offset_outcome(tmp_path_factory):
     try:
         case = BenchmarkCase(0, "library", "offset", 8.0, {"force_offset": 8.0}, 11, 12)
         outcome = run_case(case, duration=6.0, folder=str(tmp_path_factory.mktemp("bench")),
-                           diagnose_options={"candidates": ("offset",), "max_effects": 1,
-                                             "max_evaluations": 60})
+                           diagnose_options=DiagnosisOptions(candidates=("offset",), max_effects=1,
+                                                          max_evaluations=60))
     finally:
         diagnosis_module.diagnose = real
     return outcome, seen

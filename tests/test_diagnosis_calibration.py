@@ -13,7 +13,7 @@ import pytest
 from scipy import signal as sps
 
 from panto.identification.estimation.base import IdentificationData
-from panto.identification.diagnosis.pipeline import diagnose
+from panto.identification.diagnosis.pipeline import DiagnosisOptions, diagnose
 from panto.identification.diagnosis.support import (RELEVANCE, settling_time, systematic_cost)
 from panto.identification.structures.output_error import linear_output_error_from_data
 from panto.identification.structures.physical import PhysicalLinear
@@ -62,7 +62,7 @@ def _run(seed: int, drift: float = 0.0) -> IdentificationData:
 def test_the_nominal_itself_with_coloured_noise_is_none(seed):
     lines = []
     result = diagnose(_run(seed), _run(seed + 5), structure="physical-linear",
-                      progress=lines.append, max_refits=2)
+                      progress=lines.append, options=DiagnosisOptions(max_refits=2))
     assert result.verdict == "none", lines
     assert not result.gap["significant"], result.gap["reasons"]
     for output in ("F_c", "y_cb"):
@@ -72,7 +72,7 @@ def test_the_nominal_itself_with_coloured_noise_is_none(seed):
 def test_a_drifting_force_gain_is_unexplained():
     lines = []
     result = diagnose(_run(10, drift=0.2), _run(15, drift=0.2), structure="physical-linear",
-                      progress=lines.append, max_refits=2)
+                      progress=lines.append, options=DiagnosisOptions(max_refits=2))
     assert result.gap["significant"], lines
     assert result.gap["per_output"]["F_c"]["systematic_cost"] >= RELEVANCE
     assert result.verdict == "unexplained", lines

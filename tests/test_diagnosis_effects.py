@@ -17,7 +17,7 @@ from scipy import signal as sps
 
 from panto.identification.diagnosis.augmentations import AugmentedStructure, equivalent_input
 from panto.identification.estimation.base import IdentificationData
-from panto.identification.diagnosis.pipeline import Trial, _choose, diagnose
+from panto.identification.diagnosis.pipeline import DiagnosisOptions, Trial, _choose, diagnose
 from panto.identification.diagnosis.effects import PANTOGRAPH_ROLES
 from panto.identification.structures.physical import PhysicalLinear
 
@@ -75,8 +75,8 @@ def test_the_hidden_effect_is_named_first_and_closes_the_gap(effect):
     train = _data(effect, setting, values, 1)
     validation = _data(effect, setting, values, 2)
     lines: list[str] = []
-    result = diagnose(train, validation, structure="physical-linear", max_effects=1,
-                      progress=lines.append)
+    result = diagnose(train, validation, structure="physical-linear",
+                      options=DiagnosisOptions(max_effects=1), progress=lines.append)
     assert result.verdict == "effect" and result.effects[0] == effect, "\n".join(lines)
     step = result.steps[0]
     # the force fit on the withheld run rises and most of the residual energy goes

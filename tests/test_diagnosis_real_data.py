@@ -19,7 +19,7 @@ import scipy.io
 from scipy import signal as sps
 
 from panto.identification.estimation.base import IdentificationData
-from panto.identification.diagnosis.pipeline import diagnose
+from panto.identification.diagnosis.pipeline import DiagnosisOptions, diagnose
 
 SILVERBOX = Path("/work/shared/data/real/silverbox/SNLS80mV.csv")
 EMPS = Path("/work/shared/data/real/emps")
@@ -44,7 +44,8 @@ def test_silverbox_cubic_stiffness_then_offset_error_shrinks_tenfold():
     table = np.loadtxt(SILVERBOX, delimiter=",", skiprows=1, usecols=(0, 1), max_rows=TRAIN.stop)
     train = _silverbox_part(table[:, 0], table[:, 1], TRAIN)
     arrow = _silverbox_part(table[:, 0], table[:, 1], ARROW)
-    result = diagnose(train, arrow, structure="linear-2", max_effects=2)
+    result = diagnose(train, arrow, structure="linear-2",
+                      options=DiagnosisOptions(max_effects=2))
     assert result.verdict == "effect"
     assert result.effects[:2] == ("cubic_stiffness", "offset")
     linear = _rmse_mv(arrow, result.series["before"])

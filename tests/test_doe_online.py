@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from panto.identification.design.pantograph import RigInputConstraints
+from panto.identification.design.constraints import RigInputConstraints
 from panto.identification.design.pantograph_online import (
     OnlineDesigner,
     design_online_step,

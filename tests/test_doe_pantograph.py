@@ -6,9 +6,9 @@ import pytest
 
 from panto.identification.estimation.base import IdentificationData
 from panto.identification.structures.oscillators import OscillatorStructure
+from panto.identification.design.constraints import RigInputConstraints, conventional_inputs
 from panto.identification.design.pantograph import (
     DesignOptions,
-    RigInputConstraints,
     build_inputs,
     design_pantograph_experiment,
     model_inputs,
@@ -18,7 +18,7 @@ from panto.identification.design.discrimination import (
     design_discrimination,
     simulate_friction,
 )
-from panto.identification.design.profiles import conventional_inputs, write_design_profile
+from panto.identification.design.profiles import write_design_profile
 from panto.identification.design.pantograph_sensitivity import LinearisedPantograph, PressureLag
 
 CONSTRAINTS = RigInputConstraints(pressure_lag=PressureLag(0.22, 0.02))

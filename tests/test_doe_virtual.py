@@ -7,11 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from panto.identification.design.pantograph import (
-    DesignOptions,
-    RigInputConstraints,
-    design_pantograph_experiment,
-)
+from panto.identification.design.constraints import RigInputConstraints
+from panto.identification.design.pantograph import DesignOptions, design_pantograph_experiment
 from panto.identification.design.pantograph_sensitivity import LinearisedPantograph, PressureLag
 
 CONSTRAINTS = RigInputConstraints(pressure_lag=PressureLag(0.22, 0.02))

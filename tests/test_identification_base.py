@@ -2,8 +2,8 @@
 import numpy as np
 import pytest
 
-from panto.identification.estimation.base import (IdentificationData, IdentificationError, fit_percent,
-                                 identifier)
+from panto.identification.estimation.base import IdentificationData, IdentificationError, fit_percent
+from panto.identification.structures.registry import identifier
 
 
 def _data(n=100, **changes):

@@ -5,7 +5,8 @@ import pytest
 from scipy import signal
 
 from panto.fmu_src.models import Model
-from panto.identification.estimation.base import IdentificationData, IdentificationError, identifier
+from panto.identification.estimation.base import IdentificationData, IdentificationError
+from panto.identification.structures.registry import identifier
 from panto.identification.structures.blackbox import fit_state_space, parameter_names
 
 PERIOD = 0.02

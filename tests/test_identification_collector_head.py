@@ -5,8 +5,8 @@ from scipy import signal
 
 from panto.fmu_src.models import Model
 from panto.identification.estimation.base import IdentificationData, IdentificationError
-from panto.identification.structures.collector_head import (identify_collector_head, plot_collector_head,
-                                           pt2_response)
+from panto.identification.structures.collector_head import identify_collector_head, pt2_response
+from panto.identification.structures.plots import plot_collector_head
 
 
 def steps(rng, n, low, high, hold_min, hold_max):

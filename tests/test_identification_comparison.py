@@ -7,9 +7,10 @@ import pytest
 from scipy import signal
 
 from panto.identification.estimation.base import (IdentificationData, IdentificationError, Identifier,
-                                 ModelStructure, all_identifiers)
-from panto.identification.estimation.comparison import (ComparisonTable, compare_structures,
-                                       comparison_identifiers, plot_comparison, plot_validation)
+                                 ModelStructure)
+from panto.identification.estimation.comparison import ComparisonTable, compare_structures
+from panto.identification.estimation.plots import plot_comparison, plot_validation
+from panto.identification.structures.registry import all_identifiers, comparison_identifiers
 from panto.identification.estimation.least_squares import fit_least_squares
 
 PERIOD = 0.02
@@ -159,7 +160,7 @@ def test_default_structures_are_the_registered_ones_in_the_comparison():
 
 def test_bad_options_are_named(runs):
     with pytest.raises(IdentificationError, match="nonexistent"):
-        compare_structures(*runs, structures=["nonexistent"])
+        compare_structures(*runs, structures=comparison_identifiers(["nonexistent"]))
     with pytest.raises(IdentificationError, match="options for structures not compared"):
         compare_structures(*runs, structures=[LAG], options={"static": {}})
     assert isinstance(compare_structures(*runs, structures=[]), ComparisonTable)

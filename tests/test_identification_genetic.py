@@ -9,7 +9,8 @@ from scipy import signal
 
 from panto.identification.estimation.base import IdentificationData, IdentificationError, ModelStructure
 from panto.identification.estimation import genetic
-from panto.identification.estimation.genetic import ParetoResult, fit_pareto, plot_pareto, polish_cost
+from panto.identification.estimation.genetic import ParetoResult, fit_pareto, polish_cost
+from panto.identification.estimation.plots import plot_pareto
 
 PERIOD = 0.02
 

@@ -5,7 +5,8 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from panto.fmu_src.models import Model
-from panto.identification.estimation.base import IdentificationData, IdentificationError, identifier
+from panto.identification.estimation.base import IdentificationData, IdentificationError
+from panto.identification.structures.registry import identifier
 from panto.identification.structures.oscillators import OscillatorStructure, coulomb_flow, identify_oscillator
 
 PERIOD = 0.02  # 50 Hz, the identification rate (thesis 4.2)

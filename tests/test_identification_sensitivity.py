@@ -5,8 +5,9 @@ import numpy as np
 import pytest
 
 from panto.fmu_src.models import default_parameters
+from panto.identification.structures.plots import plot_eigenvalue_sensitivity
 from panto.identification.structures.sensitivity import (TABLE_4_1, eigenvalue_sensitivity, linearised_eigenvalues,
-                                        match_modes, plot_eigenvalue_sensitivity)
+                                        match_modes)
 
 MASSES = ("m1", "m2", "m3", "m4", "m_c")
 DAMPERS = ("c1", "c2", "c3", "c_c")

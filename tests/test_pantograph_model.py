@@ -5,7 +5,7 @@ import sympy as sp
 
 from panto.fmu_src.models import Model, default_parameters, numeric_model
 from panto.fmu_src.pantograph import linkage
-from panto.fmu_src.simulation import simulate_model
+from panto.fmu_src.simulation import SolverOptions, simulate_model
 
 PARAMS = default_parameters("Pantograph")
 
@@ -124,7 +124,7 @@ def test_energy_is_conserved_without_damping(extension):
     x0 = model.equilibrium(2.0, 4.0) + np.array([0.01, 0.0, 0.005, 0.0, 0.0, 0.1])
     time = np.linspace(0.0, 1.2, 13)
     response = simulate_model(model, time, {"eta": 2.0, "p": 4.0}, initial_state=x0,
-                              method="DOP853", rtol=1e-11, atol=1e-13)
+                              solver=SolverOptions(method="DOP853", rtol=1e-11, atol=1e-13))
     states = np.column_stack([response[name] for name in model.state_names])
     energy = np.array([model.energy(x, 2.0, 4.0) for x in states])
     kinetic_scale = 0.5 * 6.0 * 0.1**2  # energy given to the system, order of magnitude
@@ -137,7 +137,8 @@ def test_with_damping_it_decays_to_the_equilibrium():
     x_eq = model.equilibrium(2.0, 4.0)
     x0 = x_eq + np.array([0.01, 0.0, 0.005, 0.0, 0.0, 0.1])
     response = simulate_model(model, np.linspace(0.0, 5.0, 6), {"eta": 2.0, "p": 4.0},
-                              initial_state=x0, method="RK45", rtol=1e-9, atol=1e-12)
+                              initial_state=x0,
+                              solver=SolverOptions(method="RK45", rtol=1e-9, atol=1e-12))
     final = np.array([response[name][-1] for name in model.state_names])
     energy = [model.energy(x, 2.0, 4.0) for x in (x0, final)]
     assert np.allclose(final, x_eq, atol=1e-6)
@@ -152,7 +153,7 @@ def test_hinge_friction_dissipates_exactly_its_work():
     x0 = model.equilibrium(2.0, 4.0) + np.array([0.0, 0.0, 0.0, 0.3, 0.0, 0.0])  # kick dphi1
     time = np.linspace(0.0, 1.0, 2001)
     response = simulate_model(model, time, {"eta": 2.0, "p": 4.0}, initial_state=x0,
-                              method="DOP853", rtol=1e-11, atol=1e-13)
+                              solver=SolverOptions(method="DOP853", rtol=1e-11, atol=1e-13))
     states = np.column_stack([response[name] for name in model.state_names])
     energy = np.array([model.energy(x, 2.0, 4.0) for x in states])
     dphi1 = response["dphi1"]

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 from scipy import signal
 
+from panto.identification.data.plots import plot_aliasing_check
 from panto.identification.data.preprocessing import (PreprocessingError, check_aliasing, design_lowpass,
-                                          lowpass_zero_phase, plot_aliasing_check,
-                                          resample_dataset)
+                                          lowpass_zero_phase, resample_dataset)
 from panto.rig.dataset import Dataset, RunMetadata
 
 

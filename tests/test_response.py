@@ -7,8 +7,8 @@ import pickle
 import numpy as np
 import pytest
 
-from panto.fmu_src.response import (TimeResponse, format_header, is_close, metadata_path_for,
-                              parse_header)
+from panto.fmu_src.dataformat import format_header, metadata_path_for, parse_header
+from panto.fmu_src.response import TimeResponse, is_close
 
 
 @pytest.fixture

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from panto.fmu_src.models import Model
-from panto.fmu_src.simulation import simulate_model
+from panto.fmu_src.simulation import SolverOptions, simulate_model
 from panto.rig.imperfections import RigImperfections
 from panto.rig.testbed import VirtualTestBed
 
@@ -49,8 +49,8 @@ def test_ideal_rig_measures_the_python_model(pantograph_fmu):
     # belongs to the step [t_k, t_k+1]).
     eta_held = 2.0 + 0.5 * (slider + np.concatenate([slider[1:], slider[-1:]]))
     response = simulate_model(model, time, {"eta": eta_held, "p": np.full_like(time, 4.0)},
-                              initial_state=x0, interpolation="hold", method="LSODA",
-                              rtol=1e-9, atol=1e-11)
+                              initial_state=x0, interpolation="hold",
+                              solver=SolverOptions(method="LSODA", rtol=1e-9, atol=1e-11))
     force = _sensor(samples, "force")
     assert np.ptp(force) > 50  # it really is excited
     # Output at t_k with the bar height of sample k (the held input belongs to the next step).

@@ -8,8 +8,9 @@ import pytest
 
 from panto.rig.dataset import Dataset, RunMetadata, read_dataset
 from panto.rig.sync_led import generate_led_bits
-from panto.video_sync.merge import TrackError, read_track, sync_and_merge
-from panto.video_sync.synchronisation import SyncError, plot_synchronisation, synchronise
+from panto.video_sync.merge import MergeOptions, TrackError, read_track, sync_and_merge
+from panto.video_sync.plots import plot_synchronisation
+from panto.video_sync.synchronisation import SyncError, synchronise
 
 RATE, FPS, DECIMATION = 500.0, 50.0, 10
 MARKERS = ("pan_head", "cross_bar", "slider", "reference")
@@ -207,7 +208,8 @@ def test_cubic_upsampling_beats_linear_on_noise_free_tracks(tmp_path):
     _write_track(track, truth, start=1507, frames=1200, noise=0.0, flip=0.05, lost={}, seed=1)
     errors = {}
     for method in ("cubic", "linear"):
-        merged = sync_and_merge(folder, track, tmp_path / method, interpolation=method).dataset
+        merged = sync_and_merge(folder, track, tmp_path / method,
+                                options=MergeOptions(interpolation=method)).dataset
         rows = np.searchsorted(truth.time, merged.time - 1e-9)
         inner = slice(100, -100)  # the not-a-knot ends are less accurate
         errors[method] = np.max(np.abs(merged["video_pan_head_y"] - truth["xi"][rows])[inner])

@@ -9,7 +9,8 @@ from scipy import ndimage
 
 from panto.rig.dataset import Dataset, RunMetadata
 from panto.video_sync.camera import CameraSetup, ShadowEvent, render_run
-from panto.video_sync.setup import make_setup, plot_detection_steps, setup_from_camera
+from panto.video_sync.plots import plot_detection_steps
+from panto.video_sync.setup import make_setup, setup_from_camera
 from panto.video_sync.tracking import (SetupError, TrackerSetup, TrackResult, disk_footprint,
                                  isodata_threshold, track_video)
 

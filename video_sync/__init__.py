@@ -7,3 +7,18 @@
 - :mod:`~panto.video_sync.synchronisation`, :mod:`~panto.video_sync.merge`: the LED's PRBS aligned with
   the run's, and the track merged into the run's dataset.
 """
+
+from panto import lazy_exports
+
+# public names, imported on first use (importing the package stays cheap)
+__all__, __getattr__, __dir__ = lazy_exports(__name__, {
+    "render_run": "camera",
+    "VideoWriter": "video_io",
+    "read_frames": "video_io",
+    "video_info": "video_io",
+    "make_setup": "setup",
+    "MarkerTracker": "tracking",
+    "synchronise": "synchronisation",
+    "sync_and_merge": "merge",
+    "MergeOptions": "merge",
+})

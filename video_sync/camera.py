@@ -410,39 +410,57 @@ def render_run(source: Any, out_path: str | Path, *, setup: CameraSetup | None =
     truth, truth_path = _load_truth(source)
     where = str(truth_path or "truth dataset")
     _check_truth(truth, setup, where)
-    step = setup.sample_step
-    if start_sample is None:
-        start_sample = int(rng.integers(0, min(1000, len(truth) // 4) + 1))
-    if not 0 <= start_sample < len(truth):
-        raise ValueError(f"{where}: start_sample {start_sample} outside 0 .. {len(truth) - 1}")
-    frame_count = (len(truth) - 1 - start_sample) // step + 1
-    if duration is not None:
-        frame_count = min(frame_count, int(math.floor(duration * setup.fps)) + 1)
+    start_sample, frame_count = _frames_to_film(len(truth), setup, start_sample, duration, rng,
+                                                where)
     renderer = CameraRenderer(setup, rng)
     out_path = Path(out_path)
-    pixels = {m.name: np.empty((frame_count, 2)) for m in setup.markers}
-    visible = {m.name: np.empty(frame_count, dtype=bool) for m in setup.markers}
-    led = np.empty(frame_count, dtype=np.int8)
-    columns = {c: np.asarray(truth[c]) for m in setup.markers
-               for c in (m.x_channel, m.y_channel) if c}
     with VideoWriter(out_path, setup.width, setup.height, setup.fps, codec=codec, crf=crf,
                      preset=preset) as writer:
-        for k in range(frame_count):
-            sample = start_sample + step * k
-            positions = {m.name: (columns[m.x_channel][sample], columns[m.y_channel][sample])
-                         for m in setup.markers if m.x_channel}
-            led[k] = int(round(float(truth["led"][sample])))
-            image, centres, shown = renderer.render(k, positions, led[k])
-            writer.write(image)
-            for name in centres:
-                pixels[name][k], visible[name][k] = centres[name], shown[name]
-            if progress and (k + 1) % 500 == 0:
-                progress(f"rendered {k + 1}/{frame_count} frames")
+        pixels, visible, led = _film(truth, setup, renderer, writer, start_sample, frame_count,
+                                     progress)
     start_time = float(truth.time[start_sample])
     side = _write_camera_json(out_path, setup, codec, frame_count, start_sample, start_time,
                               truth_path)
     return RenderResult(out_path, side, start_sample, start_time, setup.fps, frame_count, pixels,
                         visible, led.astype(int))
+
+
+def _frames_to_film(samples: int, setup: CameraSetup, start_sample: int | None,
+                    duration: float | None, rng: np.random.Generator,
+                    where: str) -> tuple[int, int]:
+    """The truth sample shown by frame 0 (drawn from `rng` if not given) and the frame count."""
+    if start_sample is None:
+        start_sample = int(rng.integers(0, min(1000, samples // 4) + 1))
+    if not 0 <= start_sample < samples:
+        raise ValueError(f"{where}: start_sample {start_sample} outside 0 .. {samples - 1}")
+    frame_count = (samples - 1 - start_sample) // setup.sample_step + 1
+    if duration is not None:
+        frame_count = min(frame_count, int(math.floor(duration * setup.fps)) + 1)
+    return start_sample, frame_count
+
+
+def _film(truth: Any, setup: CameraSetup, renderer: CameraRenderer, writer: VideoWriter,
+          start_sample: int, frame_count: int, progress: Callable[[str], None] | None,
+          ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], np.ndarray]:
+    """Render and encode the frames; the marker centres [px], their visibility, the LED bits."""
+    pixels = {m.name: np.empty((frame_count, 2)) for m in setup.markers}
+    visible = {m.name: np.empty(frame_count, dtype=bool) for m in setup.markers}
+    led = np.empty(frame_count, dtype=np.int8)
+    columns = {c: np.asarray(truth[c]) for m in setup.markers
+               for c in (m.x_channel, m.y_channel) if c}
+    step = setup.sample_step
+    for k in range(frame_count):
+        sample = start_sample + step * k
+        positions = {m.name: (columns[m.x_channel][sample], columns[m.y_channel][sample])
+                     for m in setup.markers if m.x_channel}
+        led[k] = int(round(float(truth["led"][sample])))
+        image, centres, shown = renderer.render(k, positions, led[k])
+        writer.write(image)
+        for name in centres:
+            pixels[name][k], visible[name][k] = centres[name], shown[name]
+        if progress and (k + 1) % 500 == 0:
+            progress(f"rendered {k + 1}/{frame_count} frames")
+    return pixels, visible, led
 
 
 def camera_json_path(video: str | Path) -> Path:

@@ -29,7 +29,8 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from panto.rig.dataset import Dataset, read_dataset
-from panto.video_sync.synchronisation import SyncError, SyncResult, plot_synchronisation, synchronise
+from panto.video_sync.plots import plot_synchronisation
+from panto.video_sync.synchronisation import SyncError, SyncResult, synchronise
 
 TRACK_FORMAT = "panto-video-track"
 #: Markers that do not move with the pantograph (not merged).
@@ -274,11 +275,36 @@ class MergeResult:
     plot: Path | None = None
 
 
+@dataclass(frozen=True, kw_only=True)
+class MergeOptions:
+    """How :func:`sync_and_merge` synchronises a track with a run and merges the two.
+
+    Parameters
+    ----------
+    interpolation : {"cubic", "linear"}
+        Interpolation of the camera positions onto the run's grid (:func:`merge_video`).
+    led_delay : int
+        Fine samples from the recorded LED command to the frame's image (module notes).
+    min_confidence : float
+        Refuse a synchronisation below this normalised correlation.
+    min_peak_ratio : float
+        Refuse when the best correlation over the second best is below this.
+    min_overlap : int
+        Frames (with known bits) that must meet fine samples.
+    min_led_quality : float
+        Camera LED bits of lower quality count as unknown.
+    """
+
+    interpolation: str = "cubic"
+    led_delay: int = 1
+    min_confidence: float = 0.5
+    min_peak_ratio: float = 1.5
+    min_overlap: int = 250
+    min_led_quality: float = 0.0
+
+
 def sync_and_merge(run_folder: str | Path, track_csv: str | Path, out_folder: str | Path, *,
-                   interpolation: str = "cubic", min_confidence: float = 0.5,
-                   min_peak_ratio: float = 1.5, min_overlap: int = 250,
-                   min_led_quality: float = 0.0, led_delay: int = 1,
-                   plot: str | Path | None = None,
+                   options: MergeOptions | None = None, plot: str | Path | None = None,
                    progress: Callable[[str], None] | None = None) -> MergeResult:
     """Synchronise a track with a run and write the merged dataset ``<out_folder>/run.csv``.
 
@@ -292,16 +318,14 @@ def sync_and_merge(run_folder: str | Path, track_csv: str | Path, out_folder: st
     track_csv : str or pathlib.Path
     out_folder : str or pathlib.Path
         Created if needed; refused if it already holds ``run.csv``.
-    interpolation, led_delay
-        See :func:`merge_video`.
-    min_confidence, min_peak_ratio, min_overlap
-        See :func:`panto.video_sync.synchronisation.synchronise`.
-    min_led_quality : float
-        Camera LED bits of lower quality count as unknown.
+    options : MergeOptions, optional
+        Interpolation, LED delay and the synchronisation's acceptance thresholds (see
+        :func:`merge_video` and :func:`panto.video_sync.synchronisation.synchronise`).
     plot : str or pathlib.Path, optional
         Also draw the correlation (thesis Fig. 3.8) there.
     progress : callable, optional
     """
+    options = options or MergeOptions()
     say = progress or (lambda line: None)
     out = Path(out_folder) / "run.csv"
     if out.exists():
@@ -315,12 +339,13 @@ def sync_and_merge(run_folder: str | Path, track_csv: str | Path, out_folder: st
         raise SyncError(f"{dataset.metadata.sample_rate} Hz / {track.fps} fps is not a whole "
                         "number of fine samples per frame")
     decimation = int(round(dataset.metadata.sample_rate / track.fps))
-    sync = synchronise(track.led_by_frame(min_led_quality), dataset["led"],
-                       decimation=decimation, min_confidence=min_confidence,
-                       min_peak_ratio=min_peak_ratio, min_overlap=min_overlap)
+    sync = synchronise(track.led_by_frame(options.min_led_quality), dataset["led"],
+                       decimation=decimation, min_confidence=options.min_confidence,
+                       min_peak_ratio=options.min_peak_ratio, min_overlap=options.min_overlap)
     say(f"shift {sync.shift} samples (lag {sync.lag}, phase {sync.phase}), confidence "
         f"{sync.confidence:.3f}, peak ratio {sync.peak_ratio:.2f}")
-    merged = merge_video(dataset, track, sync, interpolation=interpolation, led_delay=led_delay)
+    merged = merge_video(dataset, track, sync, interpolation=options.interpolation,
+                         led_delay=options.led_delay)
     info = merged.metadata.extra["video_sync"]
     out.parent.mkdir(parents=True, exist_ok=True)
     merged.write(out)

@@ -16,12 +16,13 @@ What the thesis' routine asked of the user, done from rough clicks:
   marker; the marker's absolute position once), as in the thesis.
 
 For a rendered video, :func:`setup_from_camera` derives all of this from the camera's JSON side
-file, so the demo needs no clicks. :func:`plot_detection_steps` draws the detection steps of one
-frame for a user to check (as thesis Fig. 3.10).
+file, so the demo needs no clicks. :func:`panto.video_sync.plots.plot_detection_steps` draws the
+detection steps of one frame for a user to check (as thesis Fig. 3.10).
 """
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -29,7 +30,7 @@ import numpy as np
 from scipy import ndimage
 
 from panto.video_sync.camera import CameraSetup, load_camera_json
-from panto.video_sync.tracking import (LedSetup, MarkerSetup, SetupError, TrackerSetup, detect_marker,
+from panto.video_sync.tracking import (LedSetup, MarkerSetup, SetupError, TrackerSetup,
                                  disk_footprint, isodata_threshold, similarity)
 from panto.video_sync.video_io import FrameView, VideoError, read_frame_views
 
@@ -96,17 +97,43 @@ def _patch_colour(rgb: np.ndarray, x: float, y: float, radius: float) -> tuple[f
     return tuple(float(v) for v in rgb[patch].mean(axis=0))
 
 
+@dataclass(frozen=True, kw_only=True)
+class MarkerOptions:
+    """How :func:`setup_marker` turns a rough click into a marker's set-up (module notes).
+
+    Parameters
+    ----------
+    roi_half_size : (int, int)
+        Half width and half height [px] of the region the marker is expected to stay in.
+    patch_radius : float
+        Radius [px] of the disc around the click whose mean colour is the reference colour.
+    window : int
+        Half size [px] of the square around the click whose similarity values set the threshold.
+    max_step_px : float
+        Farthest [px] a detection may lie from the tracker's prediction before it counts as lost.
+    """
+
+    roi_half_size: tuple[int, int] = (80, 300)
+    patch_radius: float = 3.0
+    window: int = 30
+    max_step_px: float = 40.0
+
+
 def setup_marker(rgb: np.ndarray, name: str, click: tuple[float, float], *,
                  mm_per_px: tuple[float, float], offset: tuple[float, float] = (0.0, 0.0),
-                 roi_half_size: tuple[int, int] = (80, 300), patch_radius: float = 3.0,
-                 threshold: float | None = None, window: int = 30,
-                 max_step_px: float = 40.0) -> MarkerSetup:
-    """Set up one marker from a rough click (x, y) [px] in the RGB frame `rgb`."""
+                 threshold: float | None = None,
+                 options: MarkerOptions | None = None) -> MarkerSetup:
+    """Set up one marker from a rough click (x, y) [px] in the RGB frame `rgb`.
+
+    `threshold` overrides the automatic one; `options` default to ``MarkerOptions()``.
+    """
+    options = options or MarkerOptions()
+    roi_half_size, window = options.roi_half_size, options.window
     height, width = rgb.shape[:2]
     x, y = click
     if not (0 <= x < width and 0 <= y < height):
         raise SetupError(f"marker {name!r}: click ({x}, {y}) outside the {width}x{height} frame")
-    colour = _patch_colour(rgb, x, y, patch_radius)
+    colour = _patch_colour(rgb, x, y, options.patch_radius)
     x0, y0 = max(int(x) - window, 0), max(int(y) - window, 0)
     near = similarity(rgb[y0:int(y) + window + 1, x0:int(x) + window + 1], colour)
     if threshold is None:
@@ -121,7 +148,7 @@ def setup_marker(rgb: np.ndarray, name: str, click: tuple[float, float], *,
     roi = (max(int(x - roi_half_size[0]), 0), max(int(y - roi_half_size[1]), 0),
            min(int(x + roi_half_size[0]) + 1, width), min(int(y + roi_half_size[1]) + 1, height))
     return MarkerSetup(name, roi, colour, float(threshold), tuple(map(float, mm_per_px)),
-                       tuple(map(float, offset)), radius, float(max_step_px))
+                       tuple(map(float, offset)), radius, float(options.max_step_px))
 
 
 def make_setup(video: str | Path, clicks: Mapping[str, tuple[float, float]], *,
@@ -147,7 +174,7 @@ def make_setup(video: str | Path, clicks: Mapping[str, tuple[float, float]], *,
     led_half_size : int
         Half size [px] of the LED's square region.
     **options
-        Passed to :func:`setup_marker` (``roi_half_size``, ``patch_radius``, ``max_step_px``).
+        Fields of :class:`MarkerOptions` for every marker (e.g. ``roi_half_size``).
     """
     rgb = read_frame(video, frame_index).rgb()
     markers = []
@@ -155,52 +182,10 @@ def make_setup(video: str | Path, clicks: Mapping[str, tuple[float, float]], *,
         scale = mm_per_px[name] if isinstance(mm_per_px, Mapping) else mm_per_px
         markers.append(setup_marker(rgb, name, click, mm_per_px=scale,
                                     offset=(offsets or {}).get(name, (0.0, 0.0)),
-                                    threshold=(thresholds or {}).get(name), **options))
+                                    threshold=(thresholds or {}).get(name),
+                                    options=MarkerOptions(**options)))
     region = None
     if led is not None:
         region = LedSetup((max(int(led[0]) - led_half_size, 0), max(int(led[1]) - led_half_size, 0),
                            int(led[0]) + led_half_size + 1, int(led[1]) + led_half_size + 1))
     return TrackerSetup(tuple(markers), region)
-
-
-def plot_detection_steps(video: str | Path, setup: TrackerSetup, frame_index: int,
-                         out_png: str | Path) -> Path:
-    """One row per marker: region, similarity, thresholded, opened, centroid (thesis Fig. 3.10)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    view = read_frame(video, frame_index)
-    footprint = disk_footprint(setup.opening_radius)
-    figure, axes = plt.subplots(len(setup.markers), 5, figsize=(13, 2.7 * len(setup.markers)),
-                                squeeze=False)
-    for row, marker in zip(axes, setup.markers):
-        x0, y0, x1, y1 = marker.roi
-        found = detect_marker(view.crop(x0, y0, x1, y1), (x0, y0), marker, footprint, None)
-        cx, cy = (found.x_px, found.y_px) if found.valid else (0.5 * (x0 + x1), 0.5 * (y0 + y1))
-        half = int(4 * marker.radius_px + 10)
-        box = (max(int(cx) - half, x0), max(int(cy) - half, y0), min(int(cx) + half, x1),
-               min(int(cy) + half, y1))
-        rgb = view.crop(*box)
-        score = similarity(rgb, marker.colour)
-        mask = score > marker.threshold
-        opened = ndimage.binary_opening(mask, structure=footprint)
-        extent = (box[0] - 0.5, box[2] - 0.5, box[3] - 0.5, box[1] - 0.5)
-        panels = [(rgb, None, f"{marker.name}: region"), (score, "gray", "colour similarity"),
-                  (mask, "gray", f"> threshold {marker.threshold:.3f}"),
-                  (opened, "gray", f"opened (disk r={setup.opening_radius})"),
-                  (rgb, None, "centroid" if found.valid else f"lost: {found.reason}")]
-        for axis, (image, cmap, title) in zip(row, panels):
-            axis.imshow(image, cmap=cmap, extent=extent, interpolation="nearest")
-            axis.set_title(title, fontsize=9)
-            axis.tick_params(labelsize=7)
-        if found.valid:
-            row[4].plot([cx], [cy], "+", color="white", markersize=14, markeredgewidth=2)
-            row[4].plot([cx], [cy], "+", color="black", markersize=8, markeredgewidth=1)
-    figure.suptitle(f"{Path(video).name}, frame {frame_index}: marker detection steps")
-    figure.tight_layout()
-    out_png = Path(out_png)
-    figure.savefig(out_png, dpi=90)
-    plt.close(figure)
-    return out_png

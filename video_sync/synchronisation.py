@@ -170,6 +170,26 @@ def synchronise(camera_bits: np.ndarray, fine_bits: np.ndarray, *, decimation: i
     SyncError
         Not a bit sequence, too short an overlap, low confidence or no unique peak.
     """
+    shifts, rho, n, usable = _correlation(camera_bits, fine_bits, decimation, min_overlap)
+    best_value = float(np.nanmax(rho))
+    tied = np.flatnonzero(rho >= best_value - 1e-12)
+    best = int(tied[len(tied) // 2])
+    exclusion = 2 * decimation if exclusion is None else int(exclusion)
+    far = usable & (np.abs(shifts - shifts[best]) > exclusion)
+    second = float(np.nanmax(rho[far])) if far.any() else -1.0
+    confidence = min(max(best_value, 0.0), 1.0)
+    ratio = confidence / second if second > 0.0 else math.inf
+    shift = int(shifts[best])
+    lag, phase = divmod(shift, decimation)
+    result = SyncResult(shift, phase, lag, confidence, second, ratio, int(n[best]), len(tied),
+                        decimation, shifts, rho)
+    _refuse_unless_accepted(result, shifts[tied], exclusion, min_confidence, min_peak_ratio)
+    return result
+
+
+def _correlation(camera_bits: np.ndarray, fine_bits: np.ndarray, decimation: int,
+                 min_overlap: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Shifts, normalised correlation (NaN where the overlap is short), overlaps, usable mask."""
     if decimation < 1:
         raise SyncError(f"decimation = {decimation}: must be >= 1")
     camera = _code(camera_bits, "camera LED bits", allow_unknown=True)
@@ -183,24 +203,19 @@ def synchronise(camera_bits: np.ndarray, fine_bits: np.ndarray, *, decimation: i
     if not usable.any():
         raise SyncError(f"overlap too short: at best {int(n.max())} camera frames meet the "
                         f"{fine.size} fine samples, min_overlap = {min_overlap}")
-    rho = np.where(usable, r / np.maximum(n, 1.0), np.nan)
-    best_value = float(np.nanmax(rho))
-    tied = np.flatnonzero(rho >= best_value - 1e-12)
-    best = int(tied[len(tied) // 2])
-    exclusion = 2 * decimation if exclusion is None else int(exclusion)
-    far = usable & (np.abs(shifts - shifts[best]) > exclusion)
-    second = float(np.nanmax(rho[far])) if far.any() else -1.0
-    confidence = min(max(best_value, 0.0), 1.0)
-    ratio = confidence / second if second > 0.0 else math.inf
-    shift = int(shifts[best])
-    lag, phase = divmod(shift, decimation)
-    result = SyncResult(shift, phase, lag, confidence, second, ratio, int(n[best]), len(tied),
-                        decimation, shifts, rho)
-    numbers = (f"best shift {shift} fine samples (lag {lag}, phase {phase}), confidence "
-               f"{confidence:.3f}, second best {second:.3f} at more than {exclusion} samples "
-               f"away, peak ratio {ratio:.2f}, overlap {int(n[best])} frames")
-    if tied.size > 1 and np.ptp(shifts[tied]) >= tied.size:
-        raise SyncError(f"no unique peak: {tied.size} separate shifts share the best "
+    return shifts, np.where(usable, r / np.maximum(n, 1.0), np.nan), n, usable
+
+
+def _refuse_unless_accepted(result: SyncResult, tied_shifts: np.ndarray, exclusion: int,
+                            min_confidence: float, min_peak_ratio: float) -> None:
+    """Raise :class:`SyncError` for a peak that is not unique, too weak or not clear enough."""
+    confidence, ratio = result.confidence, result.peak_ratio
+    numbers = (f"best shift {result.shift} fine samples (lag {result.lag}, phase "
+               f"{result.phase}), confidence {confidence:.3f}, second best "
+               f"{result.second_best:.3f} at more than {exclusion} samples away, peak ratio "
+               f"{ratio:.2f}, overlap {result.overlap} frames")
+    if tied_shifts.size > 1 and np.ptp(tied_shifts) >= tied_shifts.size:
+        raise SyncError(f"no unique peak: {tied_shifts.size} separate shifts share the best "
                         f"correlation; {numbers}")
     if confidence < min_confidence:
         raise SyncError(f"confidence {confidence:.3f} below min_confidence = {min_confidence}: "
@@ -208,44 +223,3 @@ def synchronise(camera_bits: np.ndarray, fine_bits: np.ndarray, *, decimation: i
     if ratio < min_peak_ratio:
         raise SyncError(f"peak not clearly unique: ratio {ratio:.2f} below min_peak_ratio = "
                         f"{min_peak_ratio}; {numbers}")
-    return result
-
-
-def plot_synchronisation(result: SyncResult, out_png: str, *, window: int = 60) -> str:
-    """Correlation against coarse lag for each phase, and the peak per phase (thesis Fig. 3.8).
-
-    Parameters
-    ----------
-    result : SyncResult
-    out_png : str
-    window : int
-        Coarse lags either side of the peak in the zoomed inset.
-    """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    figure, (left, middle, right) = plt.subplots(1, 3, figsize=(15, 4.5))
-    phases = np.mod(result.shifts, result.decimation)
-    lags = np.floor_divide(result.shifts, result.decimation)
-    for p in range(result.decimation):
-        pick = phases == p
-        style = dict(linewidth=1.2 if p == result.phase else 0.5,
-                     color="black" if p == result.phase else None)
-        left.plot(lags[pick], result.correlation[pick], **style)
-        near = pick & (np.abs(lags - result.lag) <= window)
-        middle.plot(lags[near], result.correlation[near], label=f"phase {p}", **style)
-    left.set(title="normalised cross-correlation, all phases", xlabel="lag [camera frames]",
-             ylabel="rho")
-    middle.set(title=f"around the peak (lag {result.lag})", xlabel="lag [camera frames]")
-    middle.legend(fontsize=7, ncol=2)
-    right.bar(np.arange(result.decimation), result.peaks_per_phase(), color="gray")
-    right.bar([result.phase], [result.confidence], color="black")
-    right.set(title=f"peak per start phase: shift = {result.lag} x {result.decimation} + "
-                    f"{result.phase} = {result.shift}", xlabel="phase [fine samples]",
-              ylabel="peak rho", ylim=(min(0.0, np.nanmin(result.peaks_per_phase())), 1.0))
-    figure.tight_layout()
-    figure.savefig(out_png, dpi=110)
-    plt.close(figure)
-    return str(out_png)

@@ -109,7 +109,7 @@ def tell_story(duration: float = 40.0, ramps_duration: float = 60.0, *, max_effe
                progress: Callable[[str], None] | None = None) -> dict[str, Any]:
     """Record the runs, diagnose, and measure where, which and how far (module notes)."""
     from panto.identification.estimation.base import fit_percent
-    from panto.identification.diagnosis.pipeline import diagnose, fit_nominal
+    from panto.identification.diagnosis.pipeline import DiagnosisOptions, diagnose, fit_nominal
     from panto.identification.diagnosis.support import build_structure
 
     say = progress or (lambda line: None)
@@ -123,8 +123,8 @@ def tell_story(duration: float = 40.0, ramps_duration: float = 60.0, *, max_effe
                     ("clean_ramps", "ramps_validation", 43, ramps_duration, False))}
     say("rig story: runs recorded")
     train, validation, ramps = runs["train"], runs["validation"], runs["ramps"]
-    result = diagnose(train, validation, structure="physical-linear", max_effects=max_effects,
-                      progress=say)
+    result = diagnose(train, validation, structure="physical-linear",
+                      options=DiagnosisOptions(max_effects=max_effects), progress=say)
     j = validation.output_names.index("F_c")
     before = validation.outputs[:, j] - result.series["before"][:, j]
     after = validation.outputs[:, j] - result.series["after"][:, j]

@@ -20,8 +20,9 @@ Filter design (:func:`design_lowpass`)
 
 Also :func:`check_aliasing`: two runs recorded at mutually prime rates (e.g. 500 and 487 Hz) see
 a component above the lower Nyquist frequency at *different* alias frequencies; where their
-spectra disagree, aliasing is suspected (thesis Fig. 4.1); :func:`plot_aliasing_check` draws the
-two spectrograms and spectra as that figure.
+spectra disagree, aliasing is suspected (thesis Fig. 4.1);
+:func:`panto.identification.data.plots.plot_aliasing_check` draws the two spectrograms and spectra
+as that figure.
 """
 from __future__ import annotations
 
@@ -159,6 +160,23 @@ def lowpass_zero_phase(x: np.ndarray, sample_rate: float, *, stopband: float = 2
         return x.copy()
     padlen = min(3 * (2 * len(design.sos) + 1), n - 1)
     return signal.sosfiltfilt(design.sos, x, axis=axis, padlen=padlen)
+
+
+def decimate_zero_phase(x: np.ndarray, factor: int, *, axis: int = 0) -> np.ndarray:
+    """Every `factor`-th sample of `x` (from the first) after a zero-phase anti-aliasing filter.
+
+    The filter is a fixed 8th-order Butterworth low-pass at ``0.8 / factor`` of the Nyquist
+    frequency (0.8 of the new one), run forward and backward (:func:`scipy.signal.sosfiltfilt`,
+    default padding). Unlike :func:`resample_dataset` it needs no rate or band edges: it is the
+    decimation of plain tables (``panto diagnose --rate``). ``factor <= 1`` returns `x` as is.
+    """
+    from scipy import signal
+
+    if factor <= 1:
+        return x
+    sos = signal.butter(8, 0.8 / factor, output="sos")
+    filtered = signal.sosfiltfilt(sos, x, axis=axis)
+    return np.take(filtered, np.arange(0, filtered.shape[axis], factor), axis=axis)
 
 
 def _filter_with_gaps(values: np.ndarray, design: LowpassDesign) -> tuple[np.ndarray, np.ndarray]:
@@ -421,32 +439,3 @@ def check_aliasing(first: Dataset, second: Dataset, channel: str = "force", *,
                          tuple(spectra), edges, levels, difference, relevant, tolerance_db,
                          floor_db, bool(suspect.any()), where, tuple(spectrograms))
 
-
-def plot_aliasing_check(check: AliasingCheck, out_png: str) -> str:
-    """Two spectrograms and the two spectra (thesis Fig. 4.1), suspect bands shaded."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    figure, axes = plt.subplots(1, 3, figsize=(15, 4.5))
-    for axis, (f, t, power), rate in zip(axes[:2], check.spectrograms, check.rates):
-        keep = f <= check.max_frequency
-        image = axis.pcolormesh(t, f[keep], 10 * np.log10(power[keep] + 1e-300),
-                                shading="auto", cmap="viridis")
-        axis.set(title=f"{check.channel} at {rate:g} Hz", xlabel="time [s]",
-                 ylabel="frequency [Hz]")
-        figure.colorbar(image, ax=axis, label="PSD [dB]")
-    axis = axes[2]
-    for f, p, rate in zip(check.frequencies, check.spectra, check.rates):
-        axis.semilogy(f, p, label=f"{rate:g} Hz", linewidth=0.8)
-    for low, high, _ in check.where:
-        axis.axvspan(low, high, color="red", alpha=0.2)
-    verdict = "aliasing suspected" if check.aliasing_suspected else "spectra agree"
-    axis.set(title=f"spectra: {verdict}", xlabel="frequency [Hz]", ylabel="PSD",
-             xlim=(0, check.max_frequency))
-    axis.legend()
-    figure.tight_layout()
-    figure.savefig(out_png, dpi=110)
-    plt.close(figure)
-    return str(out_png)

@@ -32,11 +32,11 @@ import numpy as np
 from pymoo.algorithms.soo.nonconvex.ga import GA
 from pymoo.optimize import minimize
 
+from panto.identification.design.constraints import RigInputConstraints, conventional_inputs
 from panto.identification.design.pantograph import (
     DesignOptions,
-    RigInputConstraints,
-    _initial_population,
-    _LevelProblem,
+    LevelProblem,
+    initial_level_population,
     model_inputs,
 )
 from panto.identification.design.pantograph_sensitivity import LinearisedPantograph
@@ -214,7 +214,7 @@ class DiscriminationDesign:
                                                           self.pressure_demand)}
 
 
-class _DiscriminationProblem(_LevelProblem):
+class _DiscriminationProblem(LevelProblem):
     """Levels -> inputs as in the D design; objective -T (one simulation pair per candidate)."""
 
     def __init__(self, effect: EffectModel, constraints: RigInputConstraints,
@@ -262,16 +262,14 @@ def design_discrimination(effect: EffectModel,
             progress(f"discrimination DoE: generation {algorithm.n_gen}/{options.generations}, "
                      f"T = {-history[-1]:.6g}")
 
-    algorithm = GA(pop_size=options.population, sampling=_initial_population(problem, options),
-                   eliminate_duplicates=False)
+    algorithm = GA(pop_size=options.population,
+                   sampling=initial_level_population(problem, options), eliminate_duplicates=False)
     result = minimize(problem, algorithm, ("n_gen", options.generations), seed=options.seed,
                       verbose=False, callback=callback)
     if result.X is None:
         raise ValueError("no design met the contact-force constraint")
     motor, demand = problem.inputs(np.asarray(result.X, float))
     if conventional is None:
-        from panto.identification.design.profiles import conventional_inputs
-
         conventional = conventional_inputs(model.length, constraints)
     scores = []
     for m, d in ((motor, demand), conventional):

@@ -221,7 +221,8 @@ class OfflineDesign:
     message: str
 
 
-def _as_inputs(inputs: np.ndarray, constraints: InputConstraints) -> np.ndarray:
+def as_input_matrix(inputs: np.ndarray, constraints: InputConstraints) -> np.ndarray:
+    """`inputs` as a float array of shape (N, n_inputs) (a 1-D array is one input); checks the shape."""
     array = np.asarray(inputs, float)
     array = array[:, None] if array.ndim == 1 else array
     if array.ndim != 2 or array.shape[1] != constraints.n_inputs:
@@ -230,7 +231,7 @@ def _as_inputs(inputs: np.ndarray, constraints: InputConstraints) -> np.ndarray:
     return array
 
 
-class _SequenceRepair(Repair):
+class SequenceRepair(Repair):
     """pymoo repair: flattened increments -> increments of the clipped (feasible) inputs."""
 
     def __init__(self, constraints: InputConstraints, shape: tuple[int, int],
@@ -244,7 +245,7 @@ class _SequenceRepair(Repair):
         return self.constraints.increments(inputs, self.start).reshape(len(X), -1)
 
 
-class _DesignProblem(Problem):
+class DesignProblem(Problem):
     """Minimise the criterion cost of past inputs (fixed) followed by the candidate inputs."""
 
     def __init__(self, model: SensitivityModel, theta: np.ndarray, constraints: InputConstraints,
@@ -259,6 +260,7 @@ class _DesignProblem(Problem):
         self.n_evaluations = 0
 
     def costs(self, increments: np.ndarray) -> np.ndarray:
+        """Criterion cost per row of flattened increments (non-finite costs as 1e300)."""
         candidates = self.start + np.cumsum(increments.reshape(-1, *self.shape), axis=-2)
         past = np.broadcast_to(self.past, (len(candidates), *self.past.shape))
         _, psi = self.model.sensitivities(self.theta, np.concatenate([past, candidates], axis=-2))
@@ -281,9 +283,11 @@ def _initial_population(seeds: np.ndarray, options: GeneticOptions, rate: np.nda
     return np.vstack([seeds, picks + rng.normal(size=picks.shape) * scale])
 
 
-def _run_genetic(problem: _DesignProblem, seeds: np.ndarray, options: GeneticOptions,
-                 repair: _SequenceRepair, rate: np.ndarray,
-                 on_generation: Callable[[int, float], None] | None = None):
+def run_genetic(problem: DesignProblem, seeds: np.ndarray, options: GeneticOptions,
+                repair: SequenceRepair, rate: np.ndarray,
+                on_generation: Callable[[int, float], None] | None = None):
+    """Minimise `problem` with pymoo's GA from `seeds` and their perturbations (scaled by `rate`),
+    repaired to feasible sequences; returns the best increments and the best cost per generation."""
     rng = np.random.default_rng(options.seed)
     population = repair._do(problem, _initial_population(seeds, options, rate, rng))
     history: list[float] = []
@@ -300,7 +304,7 @@ def _run_genetic(problem: _DesignProblem, seeds: np.ndarray, options: GeneticOpt
     return np.asarray(result.X, float), np.asarray(history)
 
 
-def _regularisation(n_theta: int, noise_variance: float | np.ndarray) -> np.ndarray:
+def regularising_prior(n_theta: int, noise_variance: float | np.ndarray) -> np.ndarray:
     """A tiny prior information, so that short (early online) experiments are not singular."""
     return 1e-9 / float(np.min(noise_variance)) * np.eye(n_theta)
 
@@ -331,13 +335,14 @@ def design_offline(model: SensitivityModel, theta: Sequence[float], start_inputs
         raise ValueError(f"criterion must be one of {CRITERIA}, got {criterion!r}")
     began = time.perf_counter()
     theta = np.asarray(theta, float)
-    start_inputs = constraints.repair(constraints.increments(_as_inputs(start_inputs, constraints)))
+    start_inputs = constraints.repair(constraints.increments(as_input_matrix(start_inputs,
+                                                                             constraints)))
     shape = start_inputs.shape
     _, _, rate, initial = constraints.arrays()
-    regularisation = _regularisation(theta.size, noise_variance)
-    problem = _DesignProblem(model, theta, constraints, shape, criterion, noise_variance,
-                             np.zeros((0, shape[1])), initial, regularisation)
-    repair = _SequenceRepair(constraints, shape, None)
+    regularisation = regularising_prior(theta.size, noise_variance)
+    problem = DesignProblem(model, theta, constraints, shape, criterion, noise_variance,
+                            np.zeros((0, shape[1])), initial, regularisation)
+    repair = SequenceRepair(constraints, shape, None)
     every = max(1, options.generations // 10)
 
     def report(generation: int, best: float) -> None:
@@ -345,11 +350,11 @@ def design_offline(model: SensitivityModel, theta: Sequence[float], start_inputs
             progress(f"offline DoE: generation {generation}/{options.generations}, "
                      f"best cost {best:.6g}")
 
-    best, history = _run_genetic(problem, constraints.increments(start_inputs).reshape(1, -1),
-                                 options, repair, rate, report)
+    best, history = run_genetic(problem, constraints.increments(start_inputs).reshape(1, -1),
+                                options, repair, rate, report)
     inputs = constraints.repair(best.reshape(shape))
-    fisher = _fisher(model, theta, inputs, noise_variance)
-    start_fisher = _fisher(model, theta, start_inputs, noise_variance)
+    fisher = inputs_fisher_information(model, theta, inputs, noise_variance)
+    start_fisher = inputs_fisher_information(model, theta, start_inputs, noise_variance)
     return OfflineDesign(
         inputs, constraints.increments(inputs), start_inputs, theta, criterion, noise_variance,
         fisher, cramer_rao_covariance(fisher), float(criterion_value(fisher, criterion)),
@@ -359,7 +364,8 @@ def design_offline(model: SensitivityModel, theta: Sequence[float], start_inputs
         f"GA: {options.generations} generations of {options.population}")
 
 
-def _fisher(model: SensitivityModel, theta: np.ndarray, inputs: np.ndarray,
-            noise_variance: float | np.ndarray) -> np.ndarray:
+def inputs_fisher_information(model: SensitivityModel, theta: np.ndarray, inputs: np.ndarray,
+                              noise_variance: float | np.ndarray) -> np.ndarray:
+    """Fisher information (eq. 5.6) of `model` at `theta` for the input sequence `inputs`."""
     _, psi = model.sensitivities(theta, inputs)
     return fisher_information(psi, noise_variance)

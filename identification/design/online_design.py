@@ -24,12 +24,12 @@ from panto.identification.design.input_design import (
     InputConstraints,
     Progress,
     SensitivityModel,
-    _as_inputs,
-    _DesignProblem,
-    _fisher,
-    _regularisation,
-    _run_genetic,
-    _SequenceRepair,
+    DesignProblem,
+    SequenceRepair,
+    as_input_matrix,
+    inputs_fisher_information,
+    regularising_prior,
+    run_genetic,
 )
 
 
@@ -154,13 +154,14 @@ def design_online(model: SensitivityModel, plant: Plant, theta_initial: Sequence
     if criterion not in CRITERIA:
         raise ValueError(f"criterion must be one of {CRITERIA}, got {criterion!r}")
     began = time.perf_counter()
-    start_inputs = constraints.repair(constraints.increments(_as_inputs(start_inputs, constraints)))
+    start_inputs = constraints.repair(constraints.increments(as_input_matrix(start_inputs,
+                                                                             constraints)))
     n_samples, n_inputs = start_inputs.shape
     start_steps = constraints.increments(start_inputs)
     _, _, rate, initial = constraints.arrays()
     rls = RecursiveLeastSquares.start(theta_initial, options.initial_covariance, options.forgetting)
     design_theta = rls.theta.copy()
-    regularisation = _regularisation(design_theta.size, noise_variance)
+    regularisation = regularising_prior(design_theta.size, noise_variance)
     inputs = np.zeros((n_samples, n_inputs))
     outputs, history, step_times = [], np.zeros((n_samples, design_theta.size)), np.zeros(n_samples)
     planned = start_steps.copy()
@@ -176,12 +177,12 @@ def design_online(model: SensitivityModel, plant: Plant, theta_initial: Sequence
         horizon = min(options.horizon, n_samples - k)
         previous = inputs[k - 1] if k > 0 else initial
         seeds = np.stack([planned[k:k + horizon], start_steps[k:k + horizon]]).reshape(2, -1)
-        problem = _DesignProblem(model, design_theta, constraints, (horizon, n_inputs), criterion,
+        problem = DesignProblem(model, design_theta, constraints, (horizon, n_inputs), criterion,
                                  noise_variance, inputs[:k], previous, regularisation)
-        repair = _SequenceRepair(constraints, (horizon, n_inputs), previous)
+        repair = SequenceRepair(constraints, (horizon, n_inputs), previous)
         genetic = GeneticOptions(options.genetic.population, options.genetic.generations,
                                  options.genetic.spread, options.genetic.seed + k)
-        best, _ = _run_genetic(problem, seeds, genetic, repair, rate)
+        best, _ = run_genetic(problem, seeds, genetic, repair, rate)
         chosen = constraints.repair(best.reshape(horizon, n_inputs), previous)
         inputs[k] = chosen[0]
         planned[k:k + horizon] = constraints.increments(chosen, previous)
@@ -191,7 +192,7 @@ def design_online(model: SensitivityModel, plant: Plant, theta_initial: Sequence
         if progress is not None and ((k + 1) % every == 0 or k + 1 == n_samples):
             progress(f"online DoE: sample {k + 1}/{n_samples}, theta {np.round(rls.theta, 4)}, "
                      f"{1e3 * step_times[k]:.1f} ms")
-    fisher = _fisher(model, rls.theta, inputs, noise_variance)
+    fisher = inputs_fisher_information(model, rls.theta, inputs, noise_variance)
     return OnlineDesign(
         inputs, constraints.increments(inputs), start_inputs, np.array(outputs), rls.theta.copy(),
         history, rls.covariance.copy(), criterion, noise_variance, fisher,

@@ -1,4 +1,4 @@
-"""D-optimal inputs for the pantograph rig (thesis section 5.5; issue 7 "beyond the thesis").
+"""D-optimal inputs for the pantograph rig (thesis section 5.5, carried beyond it: both rig inputs).
 
 Both rig inputs are designed at once for a chosen structure
 (:class:`panto.identification.design.pantograph_sensitivity.LinearisedPantograph`): the linear-motor position
@@ -12,7 +12,8 @@ designed levels (thesis 4.2 uses APRBS for training): levels held for ``motor_ho
 * motor speed :math:`|\\Delta x| \\le v_\\max T`: the level sequence is followed by sequential
   clipping of the step, so the command never trips the rig's 5 mm/4 ms limiter and stays below
   the speed at which :func:`panto.rig.conditioning.following_error_bound` reaches the drive's
-  following-error warning (:meth:`RigInputConstraints.from_rig`);
+  following-error warning
+  (:meth:`~panto.identification.design.constraints.RigInputConstraints.from_rig`);
 * motor acceleration :math:`|\\Delta^2 x| \\le a_\\max T^2`: the rate-limited sequence is averaged
   over :math:`L = \\lceil 2 v_\\max / (a_\\max T) \\rceil` samples. A moving average keeps the
   amplitude and speed bounds (it is a convex combination) and changes the speed by at most
@@ -25,7 +26,8 @@ designed levels (thesis 4.2 uses APRBS for training): levels held for ``motor_ho
 :func:`design_pantograph_experiment` runs the GA (:class:`pymoo.algorithms.soo.nonconvex.ga.GA`,
 a whole population scored in one vectorised call) and compares the Cramer-Rao covariance
 (eq. 5.1) with that of the conventional input: the APRBS training profile of equal length played
-through the rig's conditioning chain (:func:`conventional_inputs`).
+through the rig's conditioning chain
+(:func:`~panto.identification.design.constraints.conventional_inputs`).
 
 The criterion is evaluated on the Fisher information of the *relative* parameters
 :math:`\\theta_i / \\theta_{i,0}` (A: sum of relative variances; D: unchanged up to a constant;
@@ -36,7 +38,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -44,130 +46,11 @@ from pymoo.algorithms.soo.nonconvex.ga import GA
 from pymoo.core.problem import Problem
 from pymoo.optimize import minimize
 
+from panto.identification.design.constraints import RigInputConstraints, conventional_inputs
 from panto.identification.design.fisher import CRITERIA, cramer_rao_covariance, criterion_cost, criterion_value
-from panto.identification.design.pantograph_sensitivity import LinearisedPantograph, PressureLag
+from panto.identification.design.pantograph_sensitivity import LinearisedPantograph
 
 Progress = Callable[[str], None]
-
-
-@dataclass(frozen=True)
-class RigInputConstraints:
-    """The rig's limits on both inputs and the design's sampling (SI; pressure in bar).
-
-    Parameters
-    ----------
-    motor_min, motor_max : float
-        Motor position range about mid-stroke [m].
-    motor_speed, motor_acceleration : float
-        :math:`v_\\max` [m/s] and :math:`a_\\max` [m/s^2] of the motor position.
-    pressure_min, pressure_max : float
-        Pressure demand range [bar] (>= 3.4 bar: the test pantograph carries its arms).
-    pressure_start : float
-        Pressure at rest before and at the start of the run [bar] (the profile offset).
-    pressure_lag : PressureLag
-        Demand -> measured pressure.
-    motor_zero_height : float
-        Model input :math:`\\eta` at motor position 0 [m].
-    sample_period : float
-        Design sample period [s] (the identification's 50 Hz).
-    motor_hold, pressure_hold : float
-        Hold time of a designed level [s].
-    minimum_contact_force : float or None
-        Least predicted contact force [N]; None: no contact constraint.
-    """
-
-    motor_min: float = -0.13
-    motor_max: float = 0.13
-    motor_speed: float = 1.25
-    motor_acceleration: float = 20.0
-    pressure_min: float = 3.4
-    pressure_max: float = 6.0
-    pressure_start: float = 4.0
-    pressure_lag: PressureLag = field(default_factory=lambda: PressureLag(0.22, 0.02))
-    motor_zero_height: float = 2.0
-    sample_period: float = 0.02
-    motor_hold: float = 0.1
-    pressure_hold: float = 0.5
-    minimum_contact_force: float | None = 20.0
-
-    def __post_init__(self) -> None:
-        checks = [("motor_max", self.motor_min < 0.0 < self.motor_max, "need motor_min < 0 < motor_max"),
-                  ("motor_speed", self.motor_speed > 0, "must be > 0 m/s"),
-                  ("motor_acceleration", self.motor_acceleration > 0, "must be > 0 m/s^2"),
-                  ("pressure_start", self.pressure_min <= self.pressure_start <= self.pressure_max
-                   and self.pressure_min < self.pressure_max, "need pressure_min <= "
-                   "pressure_start <= pressure_max, pressure_min < pressure_max"),
-                  ("sample_period", self.sample_period > 0, "must be > 0 s"),
-                  ("motor_hold", self.motor_hold >= self.sample_period, "must be >= sample_period"),
-                  ("pressure_hold", self.pressure_hold >= self.sample_period,
-                   "must be >= sample_period")]
-        for name, ok, problem in checks:
-            if not ok:
-                raise ValueError(f"RigInputConstraints.{name} = {getattr(self, name)!r}: {problem}")
-
-    @property
-    def smoothing_samples(self) -> int:
-        """Moving-average length :math:`L = \\lceil 2 v_\\max / (a_\\max T) \\rceil` (>= 1)."""
-        return max(1, math.ceil(2 * self.motor_speed / (self.motor_acceleration * self.sample_period)
-                                - 1e-9))
-
-    def hold_samples(self) -> tuple[int, int]:
-        """Samples per motor level and per pressure level."""
-        return (max(1, round(self.motor_hold / self.sample_period)),
-                max(1, round(self.pressure_hold / self.sample_period)))
-
-    def operating_point(self) -> tuple[float, float]:
-        """:math:`(\\eta_0, p_0)` at rest: mid-stroke height and the start pressure."""
-        return self.motor_zero_height, self.pressure_start
-
-    def violations(self, motor: np.ndarray, demand: np.ndarray) -> dict[str, float]:
-        """Largest violation of each limit (<= 0 when met) by motor positions and demands."""
-        t = self.sample_period
-        speed = np.diff(np.concatenate([[0.0], motor])) / t
-        tol = 1e-9
-        return {"motor_amplitude": float(max(np.max(motor) - self.motor_max,
-                                             self.motor_min - np.min(motor))) - tol,
-                "motor_speed": float(np.max(np.abs(speed)) - self.motor_speed) - tol,
-                "motor_acceleration": float(np.max(np.abs(np.diff(np.concatenate([[0.0], speed])))
-                                                   / t) - self.motor_acceleration) - tol,
-                "pressure_range": float(max(np.max(demand) - self.pressure_max,
-                                            self.pressure_min - np.min(demand))) - tol}
-
-    @classmethod
-    def from_rig(cls, profile: str = "aprbs_training", *, drive=None, valve=None, controller=None,
-                 **overrides: Any) -> RigInputConstraints:
-        """Limits from a rig profile, the drive and the pressure loop.
-
-        Amplitude and pressure ranges and the start pressure from `profile`'s limits and offset;
-        :math:`v_\\max` = the smaller of the limiter's speed (``motor_max_step`` per stream sample)
-        and the speed at which :func:`panto.rig.conditioning.following_error_bound` for the drive's
-        loop (triple pole at the position-loop bandwidth with velocity feed-forward) reaches
-        the following-error warning; the pressure lag from :func:`pressure_lag_from_rig`.
-        `overrides` replace any field.
-        """
-        from panto.rig.conditioning import following_error_bound
-        from panto.rig.drive_emulator import DriveParameters
-        from panto.rig.profiles import load_profile
-
-        from panto.identification.design.pantograph_sensitivity import pressure_lag_from_rig
-
-        from panto.identification.design.profiles import profile_path
-
-        rig = load_profile(profile_path(profile))
-        drive = drive or DriveParameters()
-        stream = 1.0 / rig.conditioning.sample_rate
-        omega = 2 * math.pi * drive.position_loop_bandwidth_hz
-        loop = ([3 * omega, 3 * omega ** 2, omega ** 3], [1, 3 * omega, 3 * omega ** 2, omega ** 3])
-        per_speed = following_error_bound(max_step=stream, sample_time=stream,
-                                          delay_periods=drive.stream_delay_periods,
-                                          closed_loop=loop)
-        speed = min(rig.limits.motor_max_step / stream, drive.following_error_warning / per_speed)
-        values = dict(motor_min=rig.limits.motor_min, motor_max=rig.limits.motor_max,
-                      motor_speed=speed, pressure_min=rig.limits.pressure_min,
-                      pressure_max=rig.limits.pressure_max, pressure_start=rig.pressure.offset,
-                      pressure_lag=pressure_lag_from_rig(pressure=rig.pressure.offset,
-                                                         valve=valve, controller=controller))
-        return cls(**(values | overrides))
 
 
 # --- the inputs ---------------------------------------------------------------------------
@@ -348,7 +231,7 @@ class DesignOptions:
             raise ValueError(f"DesignOptions need population >= 4 and generations >= 1, got {self}")
 
 
-class _LevelProblem(Problem):
+class LevelProblem(Problem):
     """Variables: motor then pressure levels scaled to [0, 1]; objective: criterion cost;
     constraint: least predicted contact force."""
 
@@ -364,12 +247,14 @@ class _LevelProblem(Problem):
         self.n_evaluations = 0
 
     def inputs(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Motor positions and pressure demands of scaled level vectors `x` (:func:`build_inputs`)."""
         c, (n_motor, _) = self.constraints, self.counts
         motor = c.motor_min + x[..., :n_motor] * (c.motor_max - c.motor_min)
         pressure = c.pressure_min + x[..., n_motor:] * (c.pressure_max - c.pressure_min)
         return build_inputs(motor, pressure, c, self.n_samples)
 
     def scores(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """Criterion cost and contact-force violation per row of `x`."""
         u = model_inputs(*self.inputs(x), self.constraints)
         fisher = self.model.fisher(u, self.noise_variance) * np.outer(self.scale, self.scale)
         cost = np.asarray(criterion_cost(fisher + 1e-12 * np.eye(len(self.scale)), self.criterion))
@@ -390,8 +275,10 @@ class _LevelProblem(Problem):
             out["G"] = force
 
 
-def _initial_population(problem: _LevelProblem, options: DesignOptions) -> np.ndarray:
-    """Binary level sequences (motor and pressure at independent amplitude fractions about the
+def initial_level_population(problem: LevelProblem, options: DesignOptions) -> np.ndarray:
+    """The GA's first population for `problem`.
+
+    Binary level sequences (motor and pressure at independent amplitude fractions about the
     middle of their ranges) and uniform random levels; each shrunk towards the middle until the
     contact constraint holds (the motor part first; at most ten halvings)."""
     rng = np.random.default_rng(options.seed)
@@ -450,7 +337,7 @@ def design_pantograph_experiment(model: LinearisedPantograph,
     n = model.length
     variance = np.asarray(noise_variance if noise_variance is not None
                           else model.noise_variance_default(), float)
-    problem = _LevelProblem(model, constraints, n, criterion, variance)
+    problem = LevelProblem(model, constraints, n, criterion, variance)
     history: list[float] = []
     every = max(1, options.generations // 10)
 
@@ -460,8 +347,8 @@ def design_pantograph_experiment(model: LinearisedPantograph,
             progress(f"pantograph DoE: generation {algorithm.n_gen}/{options.generations}, "
                      f"best cost {history[-1]:.6g}")
 
-    algorithm = GA(pop_size=options.population, sampling=_initial_population(problem, options),
-                   eliminate_duplicates=False)
+    algorithm = GA(pop_size=options.population,
+                   sampling=initial_level_population(problem, options), eliminate_duplicates=False)
     result = minimize(problem, algorithm, ("n_gen", options.generations), seed=options.seed,
                       verbose=False, callback=callback)
     if result.X is None:
@@ -469,8 +356,6 @@ def design_pantograph_experiment(model: LinearisedPantograph,
                          "minimum_contact_force or the amplitude range")
     motor, demand = problem.inputs(np.asarray(result.X, float))
     if conventional is None:
-        from panto.identification.design.profiles import conventional_inputs
-
         conventional = conventional_inputs(n, constraints)
     return _design_result(model, constraints, criterion, variance, (motor, demand), conventional,
                           np.asarray(history), problem.n_evaluations, time.perf_counter() - began,

@@ -44,7 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import LinearConstraint, minimize
 
-from panto.identification.design.pantograph import RigInputConstraints
+from panto.identification.design.constraints import RigInputConstraints
 from panto.identification.design.pantograph_sensitivity import LinearisedPantograph
 
 

@@ -6,6 +6,11 @@
 * :func:`plot_covariance_comparison`: Cramer-Rao variance of each parameter per input (log scale)
   and, if given, the grey-box variances of m, c, k (Table 5.1).
 * :func:`plot_online_estimates`: the RLS estimate during the online design against the truth.
+* :func:`plot_design`: a rig design's inputs against the conventional APRBS and the predicted
+  standard deviation per parameter (thesis section 5.5).
+
+The figures are :class:`matplotlib.figure.Figure` objects (no pyplot, no backend chosen), so the
+functions are safe in notebooks, scripts and servers.
 """
 from __future__ import annotations
 
@@ -15,21 +20,17 @@ import numpy as np
 
 from panto.identification.design.thesis_example import ThesisExample
 from panto.identification.design.fisher import LineDesign, design_line_experiment
-
-
-def _pyplot():
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    return plt
+from panto.identification.design.pantograph import PantographDesign
 
 
 def plot_line_designs(path: str | Path, designs: list[LineDesign] | None = None) -> Path:
     """The line :math:`y = k x + d` with D-optimal measurement points (Fig. 5.1)."""
-    plt = _pyplot()
+    from matplotlib.figure import Figure
+
     designs = designs or [design_line_experiment(2), design_line_experiment(3),
                           design_line_experiment(3, zero_covariance=True)]
-    figure, axes = plt.subplots(1, len(designs), figsize=(4 * len(designs), 3.4), squeeze=False)
+    figure = Figure(figsize=(4 * len(designs), 3.4))
+    axes = figure.subplots(1, len(designs), squeeze=False)
     x = np.linspace(-1, 1, 50)
     for axis, design in zip(axes[0], designs):
         axis.plot(x, 0.5 * x + 0.2, color="0.4", label="y = k x + d")
@@ -54,9 +55,11 @@ def plot_line_designs(path: str | Path, designs: list[LineDesign] | None = None)
 
 def plot_inputs_and_outputs(example: ThesisExample, path: str | Path) -> Path:
     """Force (dashed) and position (solid) for each input (thesis Figs. 5.3-5.5)."""
-    plt = _pyplot()
+    from matplotlib.figure import Figure
+
     names = list(example.evaluations)
-    figure, axes = plt.subplots(len(names), 1, figsize=(9, 2.6 * len(names)), sharex=True)
+    figure = Figure(figsize=(9, 2.6 * len(names)))
+    axes = figure.subplots(len(names), 1, sharex=True)
     period = example.settings["sample_period"]
     for axis, name in zip(np.atleast_1d(axes), names):
         evaluation = example.evaluations[name]
@@ -78,9 +81,11 @@ def plot_inputs_and_outputs(example: ThesisExample, path: str | Path) -> Path:
 
 def plot_covariance_comparison(example: ThesisExample, path: str | Path) -> Path:
     """Variances per parameter and input: Cramer-Rao of theta, grey-box of m, c, k."""
-    plt = _pyplot()
+    from matplotlib.figure import Figure
+
     names = list(example.evaluations)
-    figure, (left, right) = plt.subplots(1, 2, figsize=(11, 3.8))
+    figure = Figure(figsize=(11, 3.8))
+    left, right = figure.subplots(1, 2)
     width = 0.8 / len(names)
     for i, name in enumerate(names):
         evaluation = example.evaluations[name]
@@ -99,10 +104,12 @@ def plot_covariance_comparison(example: ThesisExample, path: str | Path) -> Path
 
 def plot_online_estimates(example: ThesisExample, path: str | Path) -> Path:
     """RLS estimate of each parameter during the online design, against the true value."""
-    plt = _pyplot()
+    from matplotlib.figure import Figure
+
     history = example.online.theta_history
     time = np.arange(len(history)) * example.settings["sample_period"]
-    figure, axes = plt.subplots(2, 2, figsize=(9, 5), sharex=True)
+    figure = Figure(figsize=(9, 5))
+    axes = figure.subplots(2, 2, sharex=True)
     for j, (axis, name) in enumerate(zip(axes.ravel(), ["a1", "a2", "b1", "b2"])):
         axis.plot(time, history[:, j], label="RLS estimate")
         axis.axhline(example.theta_true[j], color="black", ls="--", lw=0.8, label="true")
@@ -123,11 +130,53 @@ def plot_thesis_example(example: ThesisExample, folder: str | Path) -> list[Path
             plot_online_estimates(example, folder / "doe_online_estimates.png")]
 
 
+def plot_design(design: PantographDesign, folder: str | Path) -> dict[str, Path]:
+    """``doe_inputs.png`` (both inputs, designed and conventional, predicted outputs) and
+    ``doe_std.png`` (predicted relative std per parameter, designed vs conventional)."""
+    from matplotlib.figure import Figure
+
+    folder = Path(folder)
+    t = design.time
+    fig = Figure(figsize=(10, 8))
+    axes = fig.subplots(2 + len(design.output_names), 1, sharex=True)
+    axes[0].plot(t, 1e3 * design.conventional_motor_position, lw=0.8, label="APRBS (conditioned)")
+    axes[0].plot(t, 1e3 * design.motor_position, lw=0.8, label="designed")
+    axes[0].set_ylabel("motor [mm]")
+    axes[1].plot(t, design.conventional_pressure_demand, lw=0.8, label="APRBS demand")
+    axes[1].plot(t, design.pressure_demand, lw=0.8, label="designed demand")
+    axes[1].plot(t, design.pressure, lw=0.8, label="designed, measured (lag)")
+    axes[1].set_ylabel("pressure [bar]")
+    for axis, j in zip(axes[2:], range(len(design.output_names))):
+        axis.plot(t, design.conventional_outputs[:, j], lw=0.8, label="APRBS")
+        axis.plot(t, design.outputs[:, j], lw=0.8, label="designed")
+        axis.set_ylabel(design.output_names[j])
+    for axis in axes:
+        axis.legend(loc="upper right", fontsize=7)
+        axis.grid(True, alpha=0.3)
+    axes[-1].set_xlabel("time [s]")
+    fig.suptitle(f"{design.structure}: {design.criterion}-optimal inputs vs APRBS")
+    fig.tight_layout()
+    inputs = folder / "doe_inputs.png"
+    fig.savefig(inputs, dpi=120)
+    scale = np.array([abs(design.parameters[n]) or 1.0 for n in design.parameter_names])
+    fig = Figure(figsize=(8, 4))
+    axis = fig.subplots()
+    x = np.arange(len(scale))
+    axis.bar(x - 0.2, 100 * design.conventional_std / scale, 0.4, label="APRBS")
+    axis.bar(x + 0.2, 100 * design.std / scale, 0.4, label="designed")
+    axis.set_xticks(x, design.parameter_names, rotation=45)
+    axis.set_yscale("log")
+    axis.set_ylabel("predicted std [% of value]")
+    axis.legend()
+    axis.grid(True, axis="y", alpha=0.3)
+    fig.tight_layout()
+    std = folder / "doe_std.png"
+    fig.savefig(std, dpi=120)
+    return {"inputs_plot": inputs, "std_plot": std}
+
 def _save(figure, path: str | Path) -> Path:
-    import matplotlib.pyplot as plt
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     figure.tight_layout()
     figure.savefig(path, dpi=110)
-    plt.close(figure)
     return path

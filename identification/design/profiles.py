@@ -1,7 +1,8 @@
-"""Designed pantograph experiments as rig profiles, and the conventional input they beat.
+"""Designed pantograph experiments as rig profiles, and their proof on the virtual test bed.
 
-* :func:`conventional_inputs`: the APRBS training profile (thesis 4.2) of equal length as the rig
-  plays it (conditioning chain), sampled at the design period: the comparison input.
+The conventional input a design is compared with (the APRBS training profile as the rig plays it)
+is :func:`panto.identification.design.constraints.conventional_inputs`.
+
 * :func:`write_design_profile`: a designed motor position and pressure demand as a rig profile
   (``rig/profiles`` JSON format, :mod:`panto.rig.profiles`) that replays a CSV table (signal kind
   ``replay``, linear interpolation, not periodic). The conditioning keeps its limiter (which
@@ -10,8 +11,9 @@
   was designed). The written profile is read back with :func:`panto.rig.profiles.load_profile`
   (which checks every demand against the limits) and rendered with
   :func:`panto.rig.profiles.render_profile`; the rendered demand must equal the design.
-* :func:`write_design_report` / :func:`plot_design`: covariance table (CSV), summary (JSON) and
-  the plots (designed and conventional inputs, predicted std per parameter).
+* :func:`write_design_report` (plots by :func:`panto.identification.design.plots.plot_design`):
+  covariance table (CSV), summary (JSON) and the plots (designed and conventional inputs,
+  predicted std per parameter).
 """
 from __future__ import annotations
 
@@ -23,43 +25,18 @@ from typing import Any
 
 import numpy as np
 
-from panto.identification.design.pantograph import PantographDesign, RigInputConstraints
-
-
-def profile_path(profile: str | Path) -> Path:
-    """A profile file: a path, or the name of one of the rig's profiles (``aprbs_training``)."""
-    path = Path(profile)
-    if path.suffix == ".json" or path.exists():
-        return path
-    from panto import rig
-
-    return Path(rig.__file__).parent / "profiles" / f"{profile}.json"
-
-
-def conventional_inputs(n_samples: int, constraints: RigInputConstraints, *,
-                        profile: str = "aprbs_training",
-                        seed: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """The APRBS training profile of equal length as the rig plays it, at the design period.
-
-    The profile is rendered for ``n_samples`` design samples, the motor demand conditioned
-    (:class:`panto.rig.conditioning.MotorConditioner`: its 4 Hz reference filter, fade-in and limiter,
-    at the 250 Hz stream) and both channels are sampled at the design period. Returns motor
-    positions [m] and pressure demands [bar].
-    """
-    from panto.rig.conditioning import MotorConditioner
-    from panto.rig.profiles import load_profile, render_profile
-
-    rig = load_profile(profile_path(profile))
-    rig = replace(rig, duration=n_samples * constraints.sample_period,
-                  seed=rig.seed if seed is None else seed)
-    rendered = render_profile(rig)
-    every = int(round(rig.sample_rate / rig.conditioning.sample_rate))
-    stream = slice(None, None, every)
-    chain = MotorConditioner(rig.conditioning, rig.limits.motor_limits(), initial_position=0.0)
-    command = chain.apply(rendered.motor_offset[stream], rendered.motor_dynamic[stream]).command
-    step = int(round(constraints.sample_period * rig.conditioning.sample_rate))
-    pick = int(round(constraints.sample_period * rig.sample_rate))
-    return command[::step][:n_samples], rendered.pressure_demand[::pick][:n_samples]
+from panto.build_fmu.project import project_fmu
+from panto.fmu_src.models import default_parameters
+from panto.fmu_src.response import TimeResponse
+from panto.identification.data.datasets import pantograph_data
+from panto.identification.design.constraints import RigInputConstraints, profile_path
+from panto.identification.design.pantograph import PantographDesign
+from panto.identification.design.pantograph_sensitivity import LinearisedPantograph
+from panto.identification.design.plots import plot_design
+from panto.identification.estimation.least_squares import fit_least_squares
+from panto.rig.imperfections import RigImperfections
+from panto.rig.profiles import ProfileError, load_profile, render_profile
+from panto.rig.virtual import run_virtual_profile
 
 
 def design_profile_dict(name: str, table: str, duration: float,
@@ -106,9 +83,6 @@ def write_design_profile(motor: np.ndarray, demand: np.ndarray, constraints: Rig
         If the written profile does not load (a demand outside the limits) or its rendering
         differs from the design by more than 1e-9.
     """
-    from panto.fmu_src.response import TimeResponse
-    from panto.rig.profiles import ProfileError, load_profile, render_profile
-
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     motor, demand = np.asarray(motor, float), np.asarray(demand, float)
@@ -151,55 +125,6 @@ def write_design_report(design: PantographDesign, folder: str | Path, *,
             **plot_design(design, folder)}
 
 
-def plot_design(design: PantographDesign, folder: str | Path) -> dict[str, Path]:
-    """``doe_inputs.png`` (both inputs, designed and conventional, predicted outputs) and
-    ``doe_std.png`` (predicted relative std per parameter, designed vs conventional)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    folder = Path(folder)
-    t = design.time
-    fig, axes = plt.subplots(2 + len(design.output_names), 1, figsize=(10, 8), sharex=True)
-    axes[0].plot(t, 1e3 * design.conventional_motor_position, lw=0.8, label="APRBS (conditioned)")
-    axes[0].plot(t, 1e3 * design.motor_position, lw=0.8, label="designed")
-    axes[0].set_ylabel("motor [mm]")
-    axes[1].plot(t, design.conventional_pressure_demand, lw=0.8, label="APRBS demand")
-    axes[1].plot(t, design.pressure_demand, lw=0.8, label="designed demand")
-    axes[1].plot(t, design.pressure, lw=0.8, label="designed, measured (lag)")
-    axes[1].set_ylabel("pressure [bar]")
-    for axis, j in zip(axes[2:], range(len(design.output_names))):
-        axis.plot(t, design.conventional_outputs[:, j], lw=0.8, label="APRBS")
-        axis.plot(t, design.outputs[:, j], lw=0.8, label="designed")
-        axis.set_ylabel(design.output_names[j])
-    for axis in axes:
-        axis.legend(loc="upper right", fontsize=7)
-        axis.grid(True, alpha=0.3)
-    axes[-1].set_xlabel("time [s]")
-    fig.suptitle(f"{design.structure}: {design.criterion}-optimal inputs vs APRBS")
-    fig.tight_layout()
-    inputs = folder / "doe_inputs.png"
-    fig.savefig(inputs, dpi=120)
-    plt.close(fig)
-    scale = np.array([abs(design.parameters[n]) or 1.0 for n in design.parameter_names])
-    fig, axis = plt.subplots(figsize=(8, 4))
-    x = np.arange(len(scale))
-    axis.bar(x - 0.2, 100 * design.conventional_std / scale, 0.4, label="APRBS")
-    axis.bar(x + 0.2, 100 * design.std / scale, 0.4, label="designed")
-    axis.set_xticks(x, design.parameter_names, rotation=45)
-    axis.set_yscale("log")
-    axis.set_ylabel("predicted std [% of value]")
-    axis.legend()
-    axis.grid(True, axis="y", alpha=0.3)
-    fig.tight_layout()
-    std = folder / "doe_std.png"
-    fig.savefig(std, dpi=120)
-    plt.close(fig)
-    return {"inputs_plot": inputs, "std_plot": std}
-
-
-
 # --- proof on the virtual test bed -----------------------------------------------------------
 
 
@@ -207,8 +132,6 @@ def sensor_noise_only():
     """:class:`panto.rig.imperfections.RigImperfections` with every effect off except the sensors'
     white noise (force and lasers at the rig's magnitudes), so that a comparison of two inputs
     on the virtual test bed is about information, not about model errors."""
-    from panto.rig.imperfections import RigImperfections
-
     rig = RigImperfections()
     return replace(RigImperfections.none(), force_noise=rig.force_noise,
                    laser_noise=rig.laser_noise)
@@ -252,9 +175,6 @@ def identify_run(name: str, folder: Path, structure, free: Sequence[str],
                  position_latency: float | None = 0.005) -> RunEstimate:
     """Fit `free` of `structure` to the run in `folder` (50 Hz, outputs F_c and y_cb) by
     :func:`panto.identification.estimation.least_squares.fit_least_squares` from `initial`."""
-    from panto.identification.data.datasets import pantograph_data
-    from panto.identification.estimation.least_squares import fit_least_squares
-
     data = pantograph_data(folder, outputs=("F_c", "y_cb"), position_latency=position_latency)
     result = fit_least_squares(structure, data, free=free, initial=initial)
     std = {n: float(result.std[n]) for n in free}
@@ -332,8 +252,8 @@ def compare_on_virtual_rig(design: PantographDesign, folder: str | Path, *, fmu_
                            position_latency: float | None = 0.005, start_factor: float = 1.1,
                            progress: Callable[[str], None] | None = None) -> VirtualComparison:
     """Run the designed input and the APRBS profile of equal length on the virtual test bed and
-    identify the design's free parameters from each (issue 7: "run on the virtual test bed it
-    gives tighter parameter estimates than the APRBS run of equal length").
+    identify the design's free parameters from each: the design's promise is that its run gives
+    tighter parameter estimates than the APRBS run of equal length.
 
     The plant is the Pantograph FMU at ``design.parameters`` (for ``physical-linear``: its
     linearisation is the design's model), with :func:`sensor_noise_only` unless
@@ -342,17 +262,11 @@ def compare_on_virtual_rig(design: PantographDesign, folder: str | Path, *, fmu_
     the motor position advanced by `position_latency` (the drive's report latency), starting
     from the true values times `start_factor`.
     """
-    from panto.identification.design.pantograph_sensitivity import LinearisedPantograph
-    from panto.rig.profiles import load_profile
-    from panto.rig.virtual import run_virtual_profile
-
     if design.structure != "physical-linear":
         raise ValueError(f"compare_on_virtual_rig needs a 'physical-linear' design (the plant is "
                          f"the pantograph FMU, whose parameters are the truth), got "
                          f"{design.structure!r}")
     if fmu_path is None:
-        from panto.build_fmu.project import project_fmu
-
         fmu_path = project_fmu("Pantograph")
     folder = Path(folder)
     duration = round(len(design.time) * design.constraints.sample_period, 9)
@@ -382,6 +296,4 @@ def compare_on_virtual_rig(design: PantographDesign, folder: str | Path, *, fmu_
 
 
 def _fmu_parameter_names() -> set[str]:
-    from panto.fmu_src.models import default_parameters
-
     return set(default_parameters("Pantograph").names)

@@ -1,4 +1,5 @@
-"""Candidate effects as physically meaningful augmentations of a nominal model (issue 8, question 2).
+"""Candidate effects as physically meaningful augmentations of a nominal model (the diagnosis'
+second question: which effect).
 
 :class:`AugmentedStructure` ``(nominal, effect, roles, setting)`` is a :class:`ModelStructure`
 whose parameters are the nominal's plus the effect's own; it is refitted by output error (free

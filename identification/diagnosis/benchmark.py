@@ -1,5 +1,5 @@
-"""The blind benchmark of the sim-to-real diagnosis on the virtual test bed (issue 8, "proven on
-data whose effect is withheld").
+"""The blind benchmark of the sim-to-real diagnosis on the virtual test bed: the diagnosis proven on
+data whose effect is withheld.
 
 :func:`run_diagnosis_benchmark` ``(cases, seed)`` draws cases (:func:`draw_cases`), each with ONE
 hidden effect of random magnitude on an otherwise ideal test bed (sensor noise only), or none, or
@@ -66,9 +66,12 @@ import time
 from concurrent.futures import Executor, ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Mapping, Sequence
 
 import numpy as np
+
+if TYPE_CHECKING:  # imported where used: the tests wrap pipeline.diagnose
+    from panto.identification.diagnosis.pipeline import DiagnosisOptions
 
 Progress = Callable[[str], None]
 #: Library effects the test bed can hide (see the module notes for the mapping).
@@ -94,7 +97,7 @@ MAGNITUDES = {"coulomb_friction": (5.0, 60.0), "cubic_stiffness": (2e7, 4e8),
 #: Share of the cases recorded with the fast motor profile (module notes).
 FAST_SHARE = 0.5
 STRONG = 5.0
-"""Fit points an effect must cost to count for the top-1 score (issue 8)."""
+"""Fit points an effect must cost to count for the top-1 score."""
 
 
 @dataclass(frozen=True)
@@ -148,11 +151,11 @@ class BenchmarkResult:
     settings: Mapping[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
-        from panto.identification.diagnosis.residual_energy import _jsonable
+        from panto.identification.diagnosis.residual_energy import jsonable
 
-        return _jsonable({"scores": dict(self.scores), "confusion": dict(self.confusion),
-                          "settings": dict(self.settings),
-                          "cases": [_outcome_dict(o) for o in self.outcomes]})
+        return jsonable({"scores": dict(self.scores), "confusion": dict(self.confusion),
+                         "settings": dict(self.settings),
+                         "cases": [_outcome_dict(o) for o in self.outcomes]})
 
 
 def _outcome_dict(outcome: CaseOutcome) -> dict[str, Any]:
@@ -224,11 +227,11 @@ def _settings(label: str, rng: np.random.Generator) -> tuple[float, dict[str, An
 # --- one case ------------------------------------------------------------------------------
 
 def run_case(case: BenchmarkCase, *, duration: float = 25.0, structure: str = "physical-linear",
-             folder: str | None = None, diagnose_options: Mapping[str, Any] | None = None
+             folder: str | None = None, diagnose_options: DiagnosisOptions | None = None
              ) -> CaseOutcome:
     """Record the case's runs, diagnose them blind and score the outcome (module notes)."""
     from panto.identification.estimation.base import fit_percent
-    from panto.identification.diagnosis.pipeline import diagnose
+    from panto.identification.diagnosis.pipeline import DiagnosisOptions, diagnose
 
     started = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="panto-benchmark-", dir=folder) as root:
@@ -247,7 +250,8 @@ def run_case(case: BenchmarkCase, *, duration: float = 25.0, structure: str = "p
     spread = {o: float(np.nanstd(validation.outputs[:, j]))
               for j, o in enumerate(validation.output_names)}
     try:
-        result = diagnose(train, validation, structure=structure, **dict(diagnose_options or {}))
+        result = diagnose(train, validation, structure=structure,
+                          options=diagnose_options or DiagnosisOptions())
     except Exception as error:  # a failed case is scored as such, the benchmark goes on
         return CaseOutcome(case, "error", (), "error", signal_cost, {}, {}, fit_effect, math.nan,
                            time.perf_counter() - started, f"{type(error).__name__}: {error}",
@@ -369,7 +373,7 @@ def run_diagnosis_benchmark(cases: int | Sequence[BenchmarkCase], seed: int = 0,
                             executor: Executor | None = None, progress: Progress | None = None,
                             duration: float = 25.0, structure: str = "physical-linear",
                             workers: int = 2,
-                            diagnose_options: Mapping[str, Any] | None = None
+                            diagnose_options: DiagnosisOptions | None = None
                             ) -> BenchmarkResult:
     """Draw (or take) the cases, run them through `executor` (a process pool of `workers` by
     default) and score them (module notes)."""

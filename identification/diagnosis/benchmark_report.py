@@ -38,15 +38,13 @@ def _labels(confusion: Mapping[str, Mapping[str, int]]) -> tuple[list[str], list
 
 def plot_confusion(confusion: Mapping[str, Mapping[str, int]], path: str | Path) -> Path:
     """The confusion matrix as a PNG (rows: hidden effect, columns: the diagnosis' answer)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     import numpy as np
+    from matplotlib.figure import Figure
 
     rows, columns = _labels(confusion)
     counts = np.array([[confusion[r].get(c, 0) for c in columns] for r in rows], float)
-    figure, axes = plt.subplots(figsize=(max(4.0, 1.5 + 0.8 * len(columns)), max(3.0, 1.5 + 0.5 * len(rows))))
+    figure = Figure(figsize=(max(4.0, 1.5 + 0.8 * len(columns)), max(3.0, 1.5 + 0.5 * len(rows))))
+    axes = figure.subplots()
     axes.imshow(counts, cmap="Blues")
     for i in range(len(rows)):
         for j in range(len(columns)):
@@ -60,7 +58,6 @@ def plot_confusion(confusion: Mapping[str, Mapping[str, int]], path: str | Path)
     axes.set_title("Diagnosis benchmark: confusion matrix")
     figure.tight_layout()
     figure.savefig(path, dpi=110)
-    plt.close(figure)
     return Path(path)
 
 

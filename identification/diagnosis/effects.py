@@ -1,4 +1,4 @@
-"""Which effect's signature explains the gap: candidate regressors and their FROLS ranking (issue 8).
+"""Which effect's signature explains the gap: candidate regressors and their FROLS ranking.
 
 Every candidate effect of the vocabulary :data:`EFFECTS` is represented by a few *physical*
 regressor variants built from the inputs, the simulated (or measured) outputs and their

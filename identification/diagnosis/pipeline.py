@@ -1,5 +1,5 @@
 """Sim-to-real gap diagnosis: where the model and the measurement disagree, which unmodelled effect
-causes it, and how far the gap shrinks once that effect is in the model (issue 8).
+causes it, and how far the gap shrinks once that effect is in the model.
 
 :func:`diagnose` ``(train, validation, structure=...)``:
 
@@ -68,7 +68,7 @@ from panto.identification.diagnosis.support import (NO_GAIN_REASONS, build_struc
 from panto.identification.diagnosis.effects import EFFECTS, SignalRoles
 from panto.identification.estimation.least_squares import fit_least_squares
 from panto.identification.diagnosis.residual_analysis import OutputAnalysis, analyse_residuals
-from panto.identification.diagnosis.residual_energy import _jsonable
+from panto.identification.diagnosis.residual_energy import jsonable
 
 Progress = Callable[[str], None]
 
@@ -171,7 +171,7 @@ class Diagnosis:
         outputs = {o: {"fit_before": self.fit_before[o], "fit_after": self.fit_after[o],
                        "fit_train": self.fit_train.get(o), "gap_closed": self.gap_closed()[o]}
                    for o in self.output_names}
-        return _jsonable({
+        return jsonable({
             "verdict": self.verdict, "effects": list(self.effects), "structure": self.structure,
             "outputs": outputs, "fit_before": dict(self.fit_before),
             "fit_after": dict(self.fit_after), "summary": self.summary,
@@ -197,13 +197,39 @@ class _Model:
     covariance: np.ndarray | None = None
 
 
+@dataclass(frozen=True)
+class DiagnosisOptions:
+    """How far :func:`diagnose` searches and how it judges (the module notes give the tests)."""
+
+    candidates: tuple[str, ...] = EFFECTS
+    """Effects to consider (a subset of :data:`~panto.identification.diagnosis.effects.EFFECTS`)."""
+    roles: SignalRoles | None = None
+    """Which signals are position, force and actuators (default: from the structure)."""
+    max_effects: int = 3
+    """Effects accepted at most (rounds of the search)."""
+    max_refits: int = 5
+    """Candidates refitted per round."""
+    folds: int = 4
+    """Blocked folds of the validation run for the improvement's spread."""
+    max_evaluations: int = 400
+    """Model simulations per least-squares fit."""
+
+    def __post_init__(self) -> None:
+        unknown = [c for c in self.candidates if c not in EFFECTS]
+        if unknown:
+            raise IdentificationError(f"unknown candidate effect(s) {unknown}; the vocabulary is "
+                                      f"{EFFECTS}")
+        for name in ("max_effects", "max_refits", "folds", "max_evaluations"):
+            if int(getattr(self, name)) < 1:
+                raise IdentificationError(f"diagnosis option {name} = {getattr(self, name)}: "
+                                          "must be at least 1")
+
+
 def diagnose(train: IdentificationData, validation: IdentificationData, *,
              structure: str | ModelStructure,
              structure_options: Mapping[str, Any] | None = None,
-             roles: SignalRoles | None = None, candidates: Sequence[str] = EFFECTS,
-             max_effects: int = 3, max_refits: int = 5, executor: Any = None,
-             progress: Progress | None = None, folds: int = 4,
-             max_evaluations: int = 400) -> Diagnosis:
+             options: DiagnosisOptions = DiagnosisOptions(), executor: Any = None,
+             progress: Progress | None = None) -> Diagnosis:
     """Diagnose the gap between a model structure and data (module notes).
 
     Parameters
@@ -216,40 +242,20 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
     structure_options : mapping, optional
         ``free`` (the nominal's free parameters), ``fixed``, and the structure's options
         (``centre``, ``input_delay`` for ``linear-N``; ``position``, ``cutoff`` for ``rigid-body``).
-    roles : SignalRoles, optional
-        Which signals are position, force and actuators (default from the structure).
-    candidates : sequence of str
-        Effects to consider (a subset of :data:`EFFECTS`).
-    max_effects, max_refits : int
-        Effects accepted at most; candidates refitted per round.
+    options : DiagnosisOptions
+        Candidates, signal roles, search depth, folds, fit budget.
     executor : concurrent.futures.Executor, optional
         Parallel Jacobian columns in the refits.
     progress : callable, optional
         Receives progress lines.
-    folds : int
-        Blocked folds of the validation run for the improvement's spread.
-    max_evaluations : int
-        Model simulations per least-squares fit.
     """
     started = time.perf_counter()
     say = progress or (lambda line: None)
-    unknown = [c for c in candidates if c not in EFFECTS]
-    if unknown:
-        raise IdentificationError(f"unknown candidate effect(s) {unknown}; the vocabulary is "
-                                  f"{EFFECTS}")
-    if train.input_names != validation.input_names or \
-            train.output_names != validation.output_names:
-        raise IdentificationError(f"training ({train.input_names} -> {train.output_names}) and "
-                                  f"validation ({validation.input_names} -> "
-                                  f"{validation.output_names}) signals differ")
-    options = dict(structure_options or {})
-    nominal, free = build_structure(structure, train, options)
-    roles = roles or default_roles(nominal, train)
-    covered = [c for c in candidates if c in getattr(nominal, "covered_effects", ())]
-    if covered:
-        say(f"diagnose: {nominal.name} already holds {covered}; not candidates")
-        candidates = [c for c in candidates if c not in covered]
-    fit_options = {"executor": executor, "max_evaluations": max_evaluations}
+    _check_runs(train, validation)
+    nominal, free = build_structure(structure, train, dict(structure_options or {}))
+    roles = options.roles or default_roles(nominal, train)
+    candidates = _uncovered(options.candidates, nominal, say)
+    fit_options = {"executor": executor, "max_evaluations": options.max_evaluations}
     say(f"diagnose: nominal {nominal.name}, {len(free)} free parameters, {len(train)} training "
         f"and {len(validation)} validation samples, outputs {list(train.output_names)}")
     result = fit_nominal(nominal, free, train, progress=_indent(progress), **fit_options)
@@ -262,28 +268,9 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
     fit_before = _fit(validation, before)
     say("diagnose: where: validation fit " + _fits(fit_before) + "; gap " +
         ("significant: " + "; ".join(gap["reasons"]) if gap["significant"] else "within the noise"))
-    rounds, steps, accepted = [], [], []
-    current = before
-    for round_index in range(max_effects):
-        remaining = [c for c in candidates if c not in accepted]
-        ranking = rank_candidates(model, train, roles, remaining, max_refits)
-        ranking["top"] += _predicted_contact_loss(ranking["top"], remaining, roles, validation,
-                                                  current)
-        say(f"diagnose: round {round_index + 1}: ranked on the training residual: " +
-            (", ".join(f"{c['effect']} (ERR {c['err']:.3f})" for c in ranking["top"]) or
-             "no significant candidate"))
-        trials = [_try(model, c, train, validation, current, roles, folds, fit_options, say)
-                  for c in ranking["top"]]
-        passing = [t for t in trials if t[0].accepted]
-        rounds.append({"ranking": ranking["per_output"], "tried": [t[0].__dict__ for t in trials]})
-        if not passing:
-            say("diagnose: no candidate passes on the withheld data; stop")
-            break
-        trial, new_model, simulated = _choose(passing, folds)
-        steps.append(_step(trial, validation, current, simulated))
-        accepted.append(trial.effect)
-        say(f"diagnose: accepted {trial.effect}: validation fit " + _fits(trial.fit_validation))
-        model, current = new_model, simulated
+    search = _search(model, train, validation, before, roles, candidates, options, fit_options,
+                     say)
+    model, current, rounds, steps, accepted = search
     analysis_after = _analyse(validation, current, model, roles) if steps else analysis_before
     remaining_gap = _gap(model, validation, current, roles) if steps else gap
     verdict = "effect" if steps else ("unexplained" if gap["significant"] else "none")
@@ -299,6 +286,51 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
         tuple(analysis_before), tuple(analysis_after),
         {"time": validation.time, "measured": validation.outputs, "before": before,
          "after": current})
+
+
+def _check_runs(train: IdentificationData, validation: IdentificationData) -> None:
+    if train.input_names != validation.input_names or \
+            train.output_names != validation.output_names:
+        raise IdentificationError(f"training ({train.input_names} -> {train.output_names}) and "
+                                  f"validation ({validation.input_names} -> "
+                                  f"{validation.output_names}) signals differ")
+
+
+def _uncovered(candidates: Sequence[str], nominal: ModelStructure, say: Progress) -> list[str]:
+    """The candidates the nominal does not already hold (a friction structure holds friction)."""
+    covered = [c for c in candidates if c in getattr(nominal, "covered_effects", ())]
+    if covered:
+        say(f"diagnose: {nominal.name} already holds {covered}; not candidates")
+    return [c for c in candidates if c not in covered]
+
+
+def _search(model: _Model, train: IdentificationData, validation: IdentificationData,
+            before: np.ndarray, roles: SignalRoles, candidates: Sequence[str],
+            options: DiagnosisOptions, fit_options: dict, say: Progress):
+    """Rounds of rank, refit and judge until no candidate passes (module notes, step 3)."""
+    rounds, steps, accepted = [], [], []
+    current = before
+    for round_index in range(options.max_effects):
+        remaining = [c for c in candidates if c not in accepted]
+        ranking = rank_candidates(model, train, roles, remaining, options.max_refits)
+        ranking["top"] += _predicted_contact_loss(ranking["top"], remaining, roles, validation,
+                                                  current)
+        say(f"diagnose: round {round_index + 1}: ranked on the training residual: " +
+            (", ".join(f"{c['effect']} (ERR {c['err']:.3f})" for c in ranking["top"]) or
+             "no significant candidate"))
+        trials = [_try(model, c, train, validation, current, roles, options.folds, fit_options,
+                       say) for c in ranking["top"]]
+        passing = [t for t in trials if t[0].accepted]
+        rounds.append({"ranking": ranking["per_output"], "tried": [t[0].__dict__ for t in trials]})
+        if not passing:
+            say("diagnose: no candidate passes on the withheld data; stop")
+            break
+        trial, new_model, simulated = _choose(passing, options.folds)
+        steps.append(_step(trial, validation, current, simulated))
+        accepted.append(trial.effect)
+        say(f"diagnose: accepted {trial.effect}: validation fit " + _fits(trial.fit_validation))
+        model, current = new_model, simulated
+    return model, current, rounds, steps, accepted
 
 
 def _indent(progress: Progress | None) -> Progress | None:

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from panto.identification.diagnosis.residual_plots import plot_output_analysis
+from panto.identification.diagnosis.residual_plots import plot_bands, plot_output_analysis, plot_series
 
 
 def _number(value: Any, digits: int = 4) -> str:
@@ -37,71 +37,6 @@ def _table(header: list[str], rows: list[list[Any]]) -> str:
 def _image(path: Path) -> str:
     data = base64.b64encode(path.read_bytes()).decode("ascii")
     return f'<img src="data:image/png;base64,{data}" alt="{html.escape(path.name)}">'
-
-
-def plot_series(diagnosis: Any, path: Path) -> Path:
-    """Measured, nominal and augmented validation outputs (free run), and the residuals."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    series = diagnosis.series
-    names = diagnosis.output_names
-    figure, axes = plt.subplots(2 * len(names), 1, figsize=(9, 2.6 * 2 * len(names)),
-                                sharex=True, squeeze=False)
-    t = series["time"]
-    for j, name in enumerate(names):
-        top, bottom = axes[2 * j, 0], axes[2 * j + 1, 0]
-        top.plot(t, series["measured"][:, j], "k", lw=0.8, label="measured")
-        top.plot(t, series["before"][:, j], lw=0.8, label=f"nominal ({diagnosis.fit_before[name]:.1f} %)")
-        if diagnosis.effects:
-            top.plot(t, series["after"][:, j], lw=0.8,
-                     label=f"+ {', '.join(diagnosis.effects)} ({diagnosis.fit_after[name]:.1f} %)")
-        top.set_ylabel(name)
-        top.legend(fontsize=7, loc="upper right")
-        bottom.plot(t, series["measured"][:, j] - series["before"][:, j], lw=0.6, label="nominal")
-        if diagnosis.effects:
-            bottom.plot(t, series["measured"][:, j] - series["after"][:, j], lw=0.6, label="augmented")
-        bottom.set_ylabel(f"residual {name}")
-        bottom.legend(fontsize=7, loc="upper right")
-    axes[-1, 0].set_xlabel("time [s]")
-    figure.tight_layout()
-    figure.savefig(path, dpi=90)
-    plt.close(figure)
-    return path
-
-
-def plot_bands(diagnosis: Any, path: Path) -> Path | None:
-    """Residual power per band before and after each accepted effect."""
-    if not diagnosis.steps:
-        return None
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    names = diagnosis.output_names
-    figure, axes = plt.subplots(len(names), 1, figsize=(8, 2.8 * len(names)), squeeze=False)
-    for j, name in enumerate(names):
-        axis = axes[j, 0]
-        first = diagnosis.steps[0].bands[name]
-        edges = np.asarray(first["edges_hz"])
-        centres = np.arange(len(edges) - 1)
-        axis.bar(centres - 0.2, first["before"], 0.4 / len(diagnosis.steps) + 0.2, label="nominal")
-        for k, step in enumerate(diagnosis.steps):
-            axis.bar(centres + 0.2 + 0.1 * k, step.bands[name]["after"], 0.2,
-                     label=f"+ {step.effect}")
-        axis.set_yscale("log")
-        axis.set_xticks(centres, [f"{a:.2g}-{b:.2g}" for a, b in zip(edges[:-1], edges[1:])],
-                        fontsize=7)
-        axis.set_ylabel(f"residual power {name}")
-        axis.legend(fontsize=7)
-    axes[-1, 0].set_xlabel("band [Hz]")
-    figure.tight_layout()
-    figure.savefig(path, dpi=90)
-    plt.close(figure)
-    return path
 
 
 def write_report(diagnosis: Any, folder: str | Path) -> dict[str, Path]:
@@ -181,4 +116,4 @@ def _next_experiment(diagnosis: Any) -> str:
             f"</code> &mdash; {html.escape(suggestion['why'])}.</p>")
 
 
-__all__ = ["write_report", "plot_series", "plot_bands"]
+__all__ = ["write_report"]

@@ -1,4 +1,4 @@
-"""Where the gap lies: statistical analysis of a free-run residual (issue 8, question 1).
+"""Where the gap lies: statistical analysis of a free-run residual (the diagnosis' first question).
 
 Works on plain arrays of any system: inputs ``u`` (N, n_u), measured outputs ``y`` (N, n_y), the
 nominal model's free-run simulation ``y_hat`` and the sample period. The residual is
@@ -36,10 +36,11 @@ from scipy import signal as sps
 from scipy import stats
 
 from panto.identification.estimation.base import IdentificationError, fit_percent
-from panto.identification.diagnosis.residual_energy import (BandEnergy, ConditionEnergy, SegmentEnergy,
-                                            _column, _jsonable, _Serialisable, energy_by_band,
-                                            energy_by_condition, energy_by_segment,
-                                            energy_by_velocity)
+from panto.identification.diagnosis.residual_energy import (BandEnergy, ConditionEnergy,
+                                                             SegmentEnergy, Serialisable,
+                                                             energy_by_band, energy_by_condition,
+                                                             energy_by_segment, energy_by_velocity,
+                                                             finite_column, jsonable)
 
 Z_99 = 2.58
 
@@ -76,7 +77,7 @@ def correlation_bound(a: np.ndarray, b: np.ndarray, max_lag: int, z: float = Z_9
 
 
 @dataclass(frozen=True)
-class WhitenessTest(_Serialisable):
+class WhitenessTest(Serialisable):
     """Autocorrelation of a residual: ``r(tau)``, its bound and the portmanteau test."""
 
     lags: np.ndarray
@@ -93,7 +94,7 @@ def check_whiteness(residual: np.ndarray, max_lag: int = 25, *, z: float = Z_99)
 
     ``white`` holds when the portmanteau p-value exceeds the two-sided tail of `z` (1 % for 2.58).
     """
-    eps = _column(residual, "residual")
+    eps = finite_column(residual, "residual")
     n = len(eps)
     lags, r = cross_correlation(eps, eps, max_lag)
     lags, r = lags[max_lag + 1:], r[max_lag + 1:]
@@ -105,7 +106,7 @@ def check_whiteness(residual: np.ndarray, max_lag: int = 25, *, z: float = Z_99)
 
 
 @dataclass(frozen=True)
-class CrossCorrelationTest(_Serialisable):
+class CrossCorrelationTest(Serialisable):
     """Input-residual cross-correlation ``r_eps_u(tau)``, its bound and what its shape hints."""
 
     input_name: str
@@ -124,7 +125,7 @@ def check_cross_correlation(residual: np.ndarray, u: np.ndarray, max_lag: int = 
                             z: float = Z_99, input_name: str = "u",
                             sample_period: float = 1.0) -> CrossCorrelationTest:
     """Cross-correlation of the residual with one input over ``tau = -M..M`` and its reading."""
-    eps, u = _column(residual, "residual"), _column(u, input_name)
+    eps, u = finite_column(residual, "residual"), finite_column(u, input_name)
     lags, r = cross_correlation(eps, u, max_lag)
     bound = correlation_bound(eps, u, max_lag, z)
     peak = int(np.argmax(np.abs(r)))
@@ -156,7 +157,7 @@ def _hints(lags: np.ndarray, r: np.ndarray, outside: np.ndarray, bound: float,
 
 
 @dataclass(frozen=True)
-class ErrorModel(_Serialisable):
+class ErrorModel(Serialisable):
     """Model error model ``G_e = B_i / A`` per input with its confidence radius per frequency.
 
     ``radius`` is ``sqrt(chi2_2(1 - alpha) lambda_max(cov[Re G_e, Im G_e]))``: outside it (``|G_e| >
@@ -194,7 +195,7 @@ class ErrorModel(_Serialisable):
                 entry["relative_error"] = self.relative_error[i]
                 entry["max_relative_error"] = float(np.max(self.relative_error[i]))
             out["inputs"][name] = entry
-        return _jsonable(out)  # type: ignore[return-value]
+        return jsonable(out)  # type: ignore[return-value]
 
 
 def fit_error_model(u: np.ndarray, residual: np.ndarray, sample_period: float, *,
@@ -210,7 +211,7 @@ def fit_error_model(u: np.ndarray, residual: np.ndarray, sample_period: float, *
     `nominal_response` (``(n_u, n_frequencies)`` complex at :attr:`ErrorModel.frequencies`, or a
     callable of the frequencies [Hz]) gives ``|G_e / G|``.
     """
-    eps = _column(residual, "residual")
+    eps = finite_column(residual, "residual")
     u = _matrix(u, len(eps), "inputs")
     names = tuple(input_names or (f"u{i}" for i in range(u.shape[1])))
     start = max(order_b - 1, order_a)
@@ -270,7 +271,7 @@ def _largest_variance(jac: np.ndarray, covariance: np.ndarray) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class NonlinearityTest(_Serialisable):
+class NonlinearityTest(Serialisable):
     """Billings-Voon correlations of the residual with power signals; the verdict."""
 
     signals: tuple[str, ...]
@@ -292,9 +293,9 @@ def check_nonlinearity(residual: np.ndarray, u: np.ndarray, y_hat: np.ndarray, *
     non-Gaussian power signals have heavier tails than the Bartlett bound assumes, so a cubic
     residual also nudges the squares over their bounds, far less than the cube.
     """
-    eps = _column(residual, "residual")
+    eps = finite_column(residual, "residual")
     u = _matrix(u, len(eps), "inputs")
-    y_hat = _column(y_hat, "y_hat")
+    y_hat = finite_column(y_hat, "y_hat")
     names = list(input_names or (f"u{i}" for i in range(u.shape[1])))
     candidates = [(f"{n}^2", u[:, i], 2) for i, n in enumerate(names)]
     candidates += [("y_hat^2", y_hat, 2), ("y_hat^3", y_hat, 3)]
@@ -319,7 +320,7 @@ def check_nonlinearity(residual: np.ndarray, u: np.ndarray, y_hat: np.ndarray, *
 
 
 @dataclass(frozen=True)
-class DetectionLines(_Serialisable):
+class DetectionLines(Serialisable):
     """Power at excited, unexcited odd and unexcited even DFT lines of a periodic record."""
 
     n_periods: int
@@ -334,7 +335,7 @@ class DetectionLines(_Serialisable):
 
 def excited_lines(u: np.ndarray, period: int, *, threshold_db: float = -40.0) -> np.ndarray:
     """DFT line indices (per period) where the input's power is within `threshold_db` of its peak."""
-    x = _column(u, "input")
+    x = finite_column(u, "input")
     n = (len(x) // period) * period
     spectrum = np.abs(np.fft.rfft(x[:n].reshape(-1, period).mean(axis=0))) ** 2
     spectrum[0] = 0.0
@@ -351,7 +352,7 @@ def detect_nonlinear_lines(x: np.ndarray, period: int, excited: Sequence[int], *
     by the ``chi2(2K)/(2K)`` quantile (needs two or more periods; with one, only the odd/even ratio is given).
     Lines run up to `max_line` (default: the highest excited line, the in-band region).
     """
-    x = _column(x, "signal")
+    x = finite_column(x, "signal")
     n_periods = len(x) // period
     if n_periods < 1:
         raise IdentificationError(f"record of {len(x)} samples is shorter than one period {period}")
@@ -380,7 +381,7 @@ def detect_nonlinear_lines(x: np.ndarray, period: int, excited: Sequence[int], *
 
 
 @dataclass(frozen=True)
-class OutputAnalysis(_Serialisable):
+class OutputAnalysis(Serialisable):
     """Every residual test for one output."""
 
     output_name: str
@@ -410,7 +411,7 @@ class OutputAnalysis(_Serialisable):
         out["segments"] = self.segments.to_dict()
         out["nonlinearity"] = self.nonlinearity.to_dict()
         out["conditions"] = [c.to_dict() for c in self.conditions]
-        return _jsonable(out)  # type: ignore[return-value]
+        return jsonable(out)  # type: ignore[return-value]
 
 
 def analyse_residuals(u: np.ndarray, y: np.ndarray, y_hat: np.ndarray, sample_period: float, *,

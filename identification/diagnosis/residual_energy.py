@@ -1,6 +1,7 @@
-"""Where in frequency, time and operating condition a residual's energy lies (issue 8, question 1
-and 3): the energy functions of the residual analysis (:mod:`panto.identification.diagnosis.residual_analysis`)
-and the JSON helpers its results share.
+"""Where in frequency, time and operating condition a residual's energy lies (the diagnosis' first
+and third questions: where the gap lies, how far it shrinks): the energy functions of the residual
+analysis (:mod:`panto.identification.diagnosis.residual_analysis`) and the JSON helpers its results
+share.
 
 - per frequency band: Welch spectra of residual and measurement, power per band (octaves down from
   the Nyquist frequency by default), ``ratio = P_eps / P_y`` and the residual's share;
@@ -19,20 +20,22 @@ from scipy import signal as sps
 
 from panto.identification.estimation.base import IdentificationError, fit_percent
 
-def _column(x: np.ndarray, name: str) -> np.ndarray:
+def finite_column(x: np.ndarray, name: str) -> np.ndarray:
+    """`x` as a flat float array; raises IdentificationError naming `name` at a NaN or inf."""
     x = np.asarray(x, float).ravel()
     if not np.all(np.isfinite(x)):
         raise IdentificationError(f"{name}: holds NaN or inf at sample {int(np.argmin(np.isfinite(x)))}")
     return x
 
 
-def _jsonable(value: object) -> object:
+def jsonable(value: object) -> object:
+    """Plain JSON types from dicts, sequences and numpy values; NaN and inf as None."""
     if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
+        return {str(k): jsonable(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
+        return [jsonable(v) for v in value]
     if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
+        return jsonable(value.tolist())
     if isinstance(value, (np.floating, float)):
         return None if not math.isfinite(float(value)) else float(value)
     if isinstance(value, (np.integer, np.bool_)):
@@ -40,14 +43,16 @@ def _jsonable(value: object) -> object:
     return value
 
 
-class _Serialisable:
+class Serialisable:
+    """Mixin for dataclasses: :meth:`to_dict` gives their fields as plain JSON types."""
+
     def to_dict(self) -> dict:
         """JSON-ready dictionary (arrays as lists, NaN as None)."""
-        return _jsonable(asdict(self))  # type: ignore[arg-type]
+        return jsonable(asdict(self))  # type: ignore[arg-type]
 
 
 @dataclass(frozen=True)
-class BandEnergy(_Serialisable):
+class BandEnergy(Serialisable):
     """Residual against measured power per frequency band (Welch PSDs)."""
 
     frequencies: np.ndarray = field(repr=False)
@@ -69,7 +74,7 @@ def energy_by_band(measured: np.ndarray, residual: np.ndarray, sample_period: fl
     ``ratio = P_eps / P_y`` (1 = the model explains nothing there); ``share`` = part of the total
     residual power lying in the band.
     """
-    eps, y = _column(residual, "residual"), _column(measured, "measured")
+    eps, y = finite_column(residual, "residual"), finite_column(measured, "measured")
     fs = 1.0 / sample_period
     nperseg = segment_length or min(len(eps), 1024)
     f, p_eps = sps.welch(eps, fs, nperseg=nperseg)
@@ -89,7 +94,7 @@ def energy_by_band(measured: np.ndarray, residual: np.ndarray, sample_period: fl
 
 
 @dataclass(frozen=True)
-class SegmentEnergy(_Serialisable):
+class SegmentEnergy(Serialisable):
     """Residual RMS and fit per sliding time window."""
 
     start_times: np.ndarray
@@ -106,7 +111,7 @@ def energy_by_segment(measured: np.ndarray, residual: np.ndarray, sample_period:
 
     Default window: a twentieth of the record; default step: half a window.
     """
-    eps, y = _column(residual, "residual"), _column(measured, "measured")
+    eps, y = finite_column(residual, "residual"), finite_column(measured, "measured")
     n = len(eps)
     length = max(2, round(window / sample_period) if window else n // 20)
     hop = max(1, round(step / sample_period) if step else length // 2)
@@ -120,7 +125,7 @@ def energy_by_segment(measured: np.ndarray, residual: np.ndarray, sample_period:
 
 
 @dataclass(frozen=True)
-class ConditionEnergy(_Serialisable):
+class ConditionEnergy(Serialisable):
     """Residual per bin of an operating variable (velocity, amplitude, height, pressure...).
 
     ``concentration`` = share of residual energy / share of time: above 1 where the gap gathers.
@@ -138,7 +143,7 @@ class ConditionEnergy(_Serialisable):
 def energy_by_condition(residual: np.ndarray, variable: np.ndarray, *, name: str = "variable",
                         edges: Sequence[float] | None = None, n_bins: int = 5) -> ConditionEnergy:
     """Residual statistics per bin of `variable` (default: `n_bins` equally populated bins)."""
-    eps, x = _column(residual, "residual"), _column(variable, name)
+    eps, x = finite_column(residual, "residual"), finite_column(variable, name)
     if len(x) != len(eps):
         raise IdentificationError(f"{name}: {len(x)} samples for a residual of {len(eps)}")
     if edges is None:
@@ -162,7 +167,7 @@ def energy_by_velocity(residual: np.ndarray, velocity: np.ndarray, *, n_magnitud
     Coulomb friction and backlash gather the residual near zero velocity and flip its mean with
     the sign.
     """
-    v = _column(velocity, name)
+    v = finite_column(velocity, name)
     q = np.quantile(np.abs(v), np.linspace(0, 1, n_magnitude_bins + 1)[1:-1])
     edges = np.r_[-np.inf, -q[::-1], 0.0, q, np.inf]
     return energy_by_condition(residual, v, name=name, edges=np.unique(edges))
@@ -170,6 +175,6 @@ def energy_by_velocity(residual: np.ndarray, velocity: np.ndarray, *, n_magnitud
 
 def moving_amplitude(x: np.ndarray, window: int) -> np.ndarray:
     """Centred moving RMS of the mean-removed signal: an amplitude variable for conditions."""
-    x = _column(x, "signal")
+    x = finite_column(x, "signal")
     kernel = np.ones(max(1, window)) / max(1, window)
     return np.sqrt(np.convolve((x - x.mean()) ** 2, kernel, mode="same"))

@@ -39,6 +39,7 @@ from scipy import stats
 from panto.identification.estimation.base import (IdentificationData, IdentificationError, IdentificationResult,
                                  ModelStructure, fit_percent)
 from panto.identification.diagnosis.effects import SignalRoles
+from panto.identification.structures import registry
 from panto.identification.diagnosis.residual_analysis import excited_band
 
 #: Parameter of an effect whose significance is tested (default: its first parameter).
@@ -72,7 +73,7 @@ def build_structure(structure: str | ModelStructure, train: IdentificationData,
     if isinstance(structure, ModelStructure):
         model = structure
     else:
-        model = _named_structure(str(structure), train, options)
+        model = registry.build_structure(str(structure), train, options)
     if free is None:
         free = model.default_free() if hasattr(model, "default_free") else model.parameter_names
     unknown = [n for n in free if n not in model.parameter_names]
@@ -80,31 +81,6 @@ def build_structure(structure: str | ModelStructure, train: IdentificationData,
         raise IdentificationError(f"{model.name}: free parameter(s) {unknown} unknown; known: "
                                   f"{list(model.parameter_names)}")
     return model, tuple(free)
-
-
-def _named_structure(name: str, train: IdentificationData, options: dict[str, Any]
-                     ) -> ModelStructure:
-    from panto.identification.structures.output_error import linear_output_error_from_data, order_of
-    from panto.identification.structures.rigid_body import rigid_body_from_data
-
-    if order_of(name) is not None:
-        return linear_output_error_from_data(train, order_of(name), **options)
-    if name == "rigid-body":
-        return rigid_body_from_data(train, **options)
-    if name in ("physical", "physical-linear"):
-        from panto.identification.structures.physical import PhysicalLinear, PhysicalNonlinear
-
-        kind = PhysicalNonlinear if name == "physical" else PhysicalLinear
-        return kind(outputs=train.output_names, **options)
-    if name.startswith(("two-mass", "three-mass")):
-        from panto.identification.structures.oscillators import OscillatorStructure
-
-        masses = 2 if name.startswith("two") else 3
-        return OscillatorStructure(masses, name.endswith("-friction"),
-                                   outputs=train.output_names, **options)
-    raise IdentificationError(f"unknown structure {name!r} for the diagnosis: physical, "
-                              "physical-linear, two-mass, three-mass (-friction), linear-N, "
-                              "rigid-body")
 
 
 def default_roles(structure: ModelStructure, data: IdentificationData) -> SignalRoles:
@@ -465,7 +441,7 @@ def where_summary(analysis: Sequence[Any], data: IdentificationData) -> dict[str
     return out
 
 
-# --- relevance of a gap and the initial transient (issue 8) ---------------------------------
+# --- relevance of a gap and the initial transient -------------------------------------------
 
 RELEVANCE = 2.0
 """Fit points (thesis eq. 4.1.3) the systematic part of a residual must cost to be a gap.

@@ -1,4 +1,4 @@
-"""Unilateral contact in a linear(ised) model: the head leaves the wire and flies (issue 8).
+"""Unilateral contact in a linear(ised) model: the head leaves the wire and flies (contact loss).
 
 The contact element of the project's pantograph models is the carbon-contact spring between the
 head and the wire (slider) height ``eta``: ``g = k_ph (xi - eta)`` in the physical model (thesis

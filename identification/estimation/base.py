@@ -9,25 +9,17 @@
 - :class:`IdentificationResult` is what an estimator returns, whatever the structure: the
   parameters, their uncertainty, the fit on the data it was fitted to, and a way to simulate on
   other data (validation).
-- :data:`IDENTIFIERS` maps a structure name (as ``panto identify --model NAME`` takes it) to the
-  function that fits it; :func:`identifier` finds one, importing the modules that register them.
+- :class:`Identifier` is a named structure's fitting function, as
+  :mod:`panto.identification.structures.registry` (the table of structures) hands it out.
 """
 from __future__ import annotations
 
-import importlib
 import math
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
-
-#: Modules whose import registers identifiers (``register_identifier``).
-_IDENTIFIER_MODULES = ("panto.identification.structures.physical", "panto.identification.structures.oscillators",
-                       "panto.identification.structures.blackbox", "panto.identification.structures.collector_head",
-                       "panto.identification.structures.output_error",
-                       "panto.identification.structures.rigid_body")
-
 
 class IdentificationError(ValueError):
     """Bad data or options for an identification; the message names what and where."""
@@ -184,7 +176,7 @@ class IdentificationResult:
     Parameters
     ----------
     structure : str
-        Structure name (as in :data:`IDENTIFIERS`).
+        Structure name (as in :mod:`panto.identification.structures.registry`).
     method : str
         Estimator (``"levenberg-marquardt"``, ``"nsga2"``, ``"n4sid+pem"``, ...).
     parameters : mapping of str to float
@@ -241,7 +233,8 @@ class IdentificationResult:
 
 @dataclass(frozen=True)
 class Identifier:
-    """A named structure's fitting function for ``panto identify`` and ``panto compare``."""
+    """A named structure's fitting function for ``panto identify`` and ``panto compare``
+    (:func:`panto.identification.structures.registry.identifier` makes them from its table)."""
 
     name: str
     description: str
@@ -250,33 +243,3 @@ class Identifier:
     in_comparison: bool = True
     """Whether ``panto compare`` fits it (the thesis' Table of section 4.8)."""
 
-
-IDENTIFIERS: dict[str, Identifier] = {}
-
-
-def register_identifier(identifier: Identifier) -> Identifier:
-    """Add a structure's identifier to :data:`IDENTIFIERS` (called at module import)."""
-    IDENTIFIERS[identifier.name] = identifier
-    return identifier
-
-
-def identifier(name: str) -> Identifier:
-    """The registered identifier `name`; a clear error lists the known ones."""
-    for module in _IDENTIFIER_MODULES:
-        try:
-            importlib.import_module(module)
-        except ModuleNotFoundError as error:
-            if error.name != module:
-                raise
-    if name not in IDENTIFIERS:
-        raise IdentificationError(f"unknown model structure {name!r}; known: {sorted(IDENTIFIERS)}")
-    return IDENTIFIERS[name]
-
-
-def all_identifiers() -> dict[str, Identifier]:
-    """Every registered identifier (imports the registering modules)."""
-    try:
-        identifier("")
-    except IdentificationError:
-        pass
-    return dict(IDENTIFIERS)

@@ -1,7 +1,8 @@
 """The comparison of model structures (thesis section 4.8, its table).
 
-Every structure is fitted on the training run (thesis: APRBS on both inputs) by its registered
-:class:`~panto.identification.estimation.base.Identifier` and then simulated in free run on the validation run
+Every structure is fitted on the training run (thesis: APRBS on both inputs) by its
+:class:`~panto.identification.estimation.base.Identifier` (the caller takes them from the table of
+structures, :func:`panto.identification.structures.registry.comparison_identifiers`) and then simulated in free run on the validation run
 (thesis: ramps). The table holds, per structure: the number of free parameters, the fit [%] per
 output on training and on validation, the time taken, and whether it succeeded. A structure that
 fails is a row with its message; the others are not lost.
@@ -12,8 +13,10 @@ black box 6 states 35.9 / 69 %; black box 4 states 45.8 / 63.1 %; three-mass wit
 
 Examples
 --------
->>> table = compare_structures(train, validation, executor=pool)            # doctest: +SKIP
+>>> chosen = comparison_identifiers()                                       # doctest: +SKIP
+>>> table = compare_structures(train, validation, structures=chosen, executor=pool)  # doctest: +SKIP
 >>> print(table.to_markdown())                                              # doctest: +SKIP
+>>> from panto.identification.estimation.plots import plot_comparison        # doctest: +SKIP
 >>> plot_comparison(table, "comparison.png")                                # doctest: +SKIP
 """
 from __future__ import annotations
@@ -30,7 +33,7 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 
 from panto.identification.estimation.base import (IdentificationData, IdentificationError, IdentificationResult,
-                                 Identifier, all_identifiers, fit_percent, identifier)
+                                 Identifier, fit_percent)
 
 Progress = Callable[[str], None]
 
@@ -161,17 +164,8 @@ def _cell(value: float | None, missing: str = "") -> str:
     return f"{value:.1f}" if value is not None and math.isfinite(value) else missing
 
 
-def comparison_identifiers(structures: Sequence[str | Identifier] | None = None
-                           ) -> list[Identifier]:
-    """The identifiers to compare: those given (names or objects), else every registered one
-    with ``in_comparison`` (the thesis' table)."""
-    if structures is None:
-        return [i for i in all_identifiers().values() if i.in_comparison]
-    return [s if isinstance(s, Identifier) else identifier(s) for s in structures]
-
-
 def compare_structures(train: IdentificationData, validation: IdentificationData, *,
-                       structures: Sequence[str | Identifier] | None = None,
+                       structures: Sequence[Identifier],
                        executor: Any = None, progress: Progress | None = None,
                        options: Mapping[str, Mapping[str, Any]] | None = None,
                        outputs: Sequence[str] | None = None) -> ComparisonTable:
@@ -181,8 +175,9 @@ def compare_structures(train: IdentificationData, validation: IdentificationData
     ----------
     train, validation : IdentificationData
         Training run (APRBS) and validation run (ramps), same inputs and outputs.
-    structures : sequence of str or Identifier, optional
-        Default: every registered identifier with ``in_comparison``.
+    structures : sequence of Identifier
+        The structures to fit, e.g.
+        :func:`panto.identification.structures.registry.comparison_identifiers` (the thesis' table).
     executor : concurrent.futures.Executor or dask.distributed.Client, optional
         Passed to each identifier (its populations, Jacobian columns, multistarts).
     progress : callable, optional
@@ -201,7 +196,11 @@ def compare_structures(train: IdentificationData, validation: IdentificationData
     if not outputs:
         raise IdentificationError(f"{train.source or 'training'} and "
                                   f"{validation.source or 'validation'} share no output")
-    chosen = comparison_identifiers(structures)
+    chosen = list(structures)
+    strays = [s for s in chosen if not isinstance(s, Identifier)]
+    if strays:
+        raise IdentificationError(f"structures {strays} are not Identifier records (name them "
+                                  "through panto.identification.structures.registry)")
     known = {i.name for i in chosen}
     stray = sorted(set(options or {}) - known)
     if stray:
@@ -263,89 +262,3 @@ def validation_fits(result: IdentificationResult, validation: IdentificationData
                                   f"not match {len(validation)} samples x outputs {fitted}")
     return {o: float(fit_percent(validation.output(o), simulated[:, fitted.index(o)]))
             if o in fitted and o in validation.output_names else math.nan for o in outputs}
-
-
-# -------------------------------------------------------------------------------- plots
-def plot_comparison(table: ComparisonTable, out_png: str | os.PathLike, *,
-                    floor: float = -100.0) -> str | os.PathLike:
-    """Bar chart of the fits (training hatched, validation solid) per structure and output.
-
-    Fits below `floor` are drawn at the floor and labelled with their value.
-    """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    rows = table.rows
-    groups = [(o, on) for o in table.outputs for on in ("training", "validation")]
-    width = 0.8 / len(groups)
-    fig, ax = plt.subplots(figsize=(max(6.0, 1.4 * len(rows) + 2), 4.5))
-    colours = plt.get_cmap("tab10").colors
-    lowest = 0.0
-    for g, (output, on) in enumerate(groups):
-        values = np.array([r.score(output, on) for r in rows])
-        shown = np.where(np.isfinite(values), np.maximum(values, floor), 0.0)
-        lowest = min(lowest, float(shown.min(initial=0.0)))
-        x = np.arange(len(rows)) + (g - (len(groups) - 1) / 2) * width
-        ax.bar(x, shown, width, color=colours[table.outputs.index(output) % 10],
-               hatch="//" if on == "training" else None, alpha=0.6 if on == "training" else 1.0,
-               edgecolor="k", linewidth=0.5, label=f"{output}, {on}")
-        for xi, value in zip(x, values):
-            if np.isfinite(value) and value < floor:
-                ax.text(xi, floor, f"{value:.0f}", rotation=90, fontsize=7, va="bottom")
-    for i, row in enumerate(rows):
-        if row.result is None:
-            ax.text(i, 2.0, "failed", ha="center", fontsize=8, color="tab:red")
-    ax.set_xticks(range(len(rows)), [r.structure for r in rows], rotation=30, ha="right")
-    ax.set_ylabel("fit [%]")
-    ax.axhline(0.0, color="k", linewidth=0.8)
-    ax.set_ylim(lowest - 5, 105)
-    ax.set_title("Model structures: fit on training and validation (free run)")
-    ax.grid(True, axis="y", alpha=0.3)
-    ax.legend(fontsize=8, ncol=2)
-    fig.tight_layout()
-    fig.savefig(out_png, dpi=120)
-    plt.close(fig)
-    return out_png
-
-
-def plot_validation(table: ComparisonTable, validation: IdentificationData,
-                    folder: str | os.PathLike) -> list[Path]:
-    """One PNG per identified structure: measured and simulated outputs on the validation run."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
-    written = []
-    for row in table.rows:
-        if row.result is None:
-            continue
-        try:
-            simulated = np.asarray(row.result.simulate(validation), float)
-        except Exception:  # noqa: BLE001 - the row already says why
-            continue
-        fitted = list(row.result.fit)
-        shown = [o for o in table.outputs if o in fitted]
-        fig, axes = plt.subplots(len(shown), 1, figsize=(9.0, 2.6 * len(shown)), sharex=True,
-                                 squeeze=False)
-        for ax, output in zip(axes[:, 0], shown):
-            unit = validation.units.get(output, "")
-            ax.plot(validation.time, validation.output(output), color="0.4", lw=0.8,
-                    label="measured")
-            ax.plot(validation.time, simulated[:, fitted.index(output)], color="k", lw=1.2,
-                    label=f"simulated (fit {_cell(row.fit_validation.get(output), '-')} %)")
-            ax.set_ylabel(f"{output} [{unit}]" if unit else output)
-            ax.grid(True, alpha=0.3)
-            ax.legend(fontsize=8, loc="upper right")
-        axes[-1, 0].set_xlabel("time [s]")
-        fig.suptitle(f"{row.structure}: validation ({validation.source or 'validation data'})")
-        fig.tight_layout()
-        path = folder / f"validation_{row.structure}.png"
-        fig.savefig(path, dpi=110)
-        plt.close(fig)
-        written.append(path)
-    return written

@@ -25,6 +25,7 @@ Examples
 ...                     generations=30)                                  # doctest: +SKIP
 >>> chosen = result.pick(rule="knee")                                    # doctest: +SKIP
 >>> better = result.polish(chosen, data)                                 # doctest: +SKIP
+>>> from panto.identification.estimation.plots import plot_pareto       # doctest: +SKIP
 >>> plot_pareto(result, "pareto.png", picked=chosen, polished=better)    # doctest: +SKIP
 """
 from __future__ import annotations
@@ -510,47 +511,3 @@ def _pareto_result(setup: _Setup, algorithm: Any, history: list[dict], evaluatio
         objectives=100.0 - costs[order] if len(order) else np.empty((0, costs.shape[1])),
         population_objectives=100.0 - final, history=tuple(history), bounds=setup.bounds,
         n_evaluations=evaluations, wall_time=time.perf_counter() - start, message=message)
-
-
-# ------------------------------------------------------------------------------------ plot
-def plot_pareto(result: ParetoResult, out_png: str | os.PathLike, *,
-                picked: IdentificationResult | None = None,
-                polished: IdentificationResult | None = None, title: str | None = None):
-    """The Pareto front as thesis Fig. 4.7: fit on the cross bar against fit on the force.
-
-    Grey: the final population; black: the non-dominated solutions; a star marks the picked
-    solution and an arrow leads to it after LM polishing. Returns the written path.
-    """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    names = result.objective_names
-    if len(names) < 2:
-        raise IdentificationError("plot_pareto needs two objectives")
-    fig, ax = plt.subplots(figsize=(6.0, 4.5))
-    population = result.population_objectives
-    shown = np.all(population > 100.0 - PENALTY, axis=1)
-    ax.scatter(population[shown, 0], population[shown, 1], s=12, c="0.75", label="population")
-    ax.scatter(result.objectives[:, 0], result.objectives[:, 1], s=22, c="k",
-               label="non-dominated")
-    marks = [(picked, "picked", "tab:red", "*"), (polished, "after LM polish", "tab:green", "D")]
-    points = {}
-    for choice, label, colour, marker in marks:
-        if choice is not None and all(n in choice.fit for n in names[:2]):
-            points[label] = (choice.fit[names[0]], choice.fit[names[1]])
-            ax.scatter(*points[label], s=120, c=colour, marker=marker, label=label, zorder=3)
-    if len(points) == 2:
-        ax.annotate("", xy=points["after LM polish"], xytext=points["picked"],
-                    arrowprops={"arrowstyle": "->", "color": "tab:green"})
-    ax.set_xlabel(f"fit on {names[0]} [%]")
-    ax.set_ylabel(f"fit on {names[1]} [%]")
-    ax.set_title(title or f"Pareto front, {result.structure.name} ({result.n_evaluations} "
-                          "evaluations)")
-    ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(out_png, dpi=120)
-    plt.close(fig)
-    return out_png

@@ -2,9 +2,10 @@
 
 :func:`write_identification` writes into one folder
 
-- ``parameters.json``: for the pantograph structures a :mod:`fmu_src` parameter file (every model
-  parameter, the identified ones with their provenance) that ``panto linearise --parameters`` and
-  the FMU build accept; for other structures the plain values;
+- ``parameters.json``: for a structure of an fmu_src model (``parameter_set``, which the table of
+  structures, :func:`panto.identification.structures.registry.parameter_set`, names) that model's
+  parameter file (every model parameter, the identified ones with their provenance) that
+  ``panto linearise --parameters`` and the FMU build accept; for other structures the plain values;
 - ``result.json``: structure, method, fit per output (training and validation), parameters with
   standard deviation, 95 % interval and nominal value, identifiability, wall time, evaluations,
   success and message;
@@ -19,20 +20,24 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from panto.identification.estimation.base import IdentificationData, IdentificationResult, fit_percent
-
-#: Structures whose parameters are pantograph model parameters (fmu_src "Pantograph").
-PANTOGRAPH_STRUCTURES = ("physical", "physical-linear")
-
+from panto.identification.estimation.base import IdentificationData, IdentificationResult
+from panto.identification.estimation.plots import plot_fit
 
 def write_identification(result: IdentificationResult, folder: str | Path, *,
                          data: IdentificationData,
                          validation: IdentificationData | None = None,
-                         nominal: Mapping[str, float] | None = None) -> dict[str, Path]:
-    """Write the parameter file, the result summary and the plot; returns their paths."""
+                         nominal: Mapping[str, float] | None = None,
+                         parameter_set: str | None = None) -> dict[str, Path]:
+    """Write the parameter file, the result summary and the plot; returns their paths.
+
+    `parameter_set` is the fmu_src model whose parameter file the result fills (``"Pantograph"``;
+    :func:`panto.identification.structures.registry.parameter_set` of the structure), None for
+    plain JSON.
+    """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    paths = {"parameters": write_parameters(result, folder / "parameters.json"),
+    paths = {"parameters": write_parameters(result, folder / "parameters.json",
+                                            parameter_set=parameter_set),
              "result": folder / "result.json", "plot": folder / "fit.png"}
     summary = result_summary(result, data=data, validation=validation, nominal=nominal)
     paths["result"].write_text(json.dumps(summary, indent=2, default=_plain) + "\n")
@@ -40,13 +45,15 @@ def write_identification(result: IdentificationResult, folder: str | Path, *,
     return paths
 
 
-def write_parameters(result: IdentificationResult, path: str | Path) -> Path:
-    """The identified parameters as a file the FMUs accept (pantograph) or plain JSON."""
+def write_parameters(result: IdentificationResult, path: str | Path, *,
+                     parameter_set: str | None = None) -> Path:
+    """The identified parameters as the parameter file of fmu_src model `parameter_set` (which
+    the FMUs accept), or plain JSON when it is None."""
     path = Path(path)
-    if result.structure in PANTOGRAPH_STRUCTURES:
+    if parameter_set is not None:
         from panto.fmu_src.models import default_parameters
 
-        defaults = default_parameters("Pantograph")
+        defaults = default_parameters(parameter_set)
         values = {k: v for k, v in result.parameters.items() if k in defaults.names}
         content = defaults.with_values(values).to_dict()
         for name in result.free:
@@ -95,40 +102,6 @@ def _validation_fit(result: IdentificationResult, validation: IdentificationData
         return result.fit_on(validation, names)
     except (ValueError, ArithmeticError, RuntimeError) as error:
         return {"error": str(error)}
-
-
-def plot_fit(result: IdentificationResult, data: IdentificationData, path: str | Path, *,
-             validation: IdentificationData | None = None) -> Path:
-    """Measured (grey) and simulated (black) free run per output; a column per data set."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    sets = [("training", data)] + ([("validation", validation)] if validation is not None else [])
-    outputs = [o for o in result.fit]
-    fig, axes = plt.subplots(len(outputs), len(sets), figsize=(7 * len(sets), 2.6 * len(outputs)),
-                             squeeze=False, sharex="col")
-    for column, (label, d) in enumerate(sets):
-        try:
-            simulated = result.simulate(d)
-        except (ValueError, ArithmeticError, RuntimeError):
-            simulated = np.full((len(d), len(outputs)), np.nan)
-        for row, name in enumerate(outputs):
-            ax = axes[row, column]
-            measured = d.output(name)
-            fit = fit_percent(measured, simulated[:, row])
-            ax.plot(d.time, measured, color="0.6", lw=0.8, label="measured")
-            ax.plot(d.time, simulated[:, row], color="k", lw=0.8, label="simulated")
-            ax.set_ylabel(f"{name} [{d.units.get(name, '')}]")
-            ax.set_title(f"{label}: {name}, fit {fit:.1f} %", fontsize=9)
-        axes[-1, column].set_xlabel("time [s]")
-    axes[0, 0].legend(loc="upper right", fontsize=8)
-    fig.suptitle(f"{result.structure} ({result.method}), free run", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return Path(path)
 
 
 def _plain(value: Any) -> Any:

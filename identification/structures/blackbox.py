@@ -39,7 +39,7 @@ import numpy as np
 from scipy import linalg, optimize, signal
 
 from panto.identification.estimation.base import (IdentificationData, IdentificationError, IdentificationResult,
-                                 Identifier, fit_percent, register_identifier)
+                                 fit_percent)
 
 Progress = Callable[[str], None]
 #: Default fitted outputs when present (the thesis' two objectives).
@@ -503,20 +503,6 @@ def identify_state_space(data: IdentificationData, *, order: int, executor: Any 
     return fit_state_space(data.select_outputs(outputs), order, refine=refine, horizon=horizon,
                            progress=progress, max_evaluations=max_evaluations)
 
-
-def _identifier(order: int) -> Callable[..., IdentificationResult]:
-    def identify(data: IdentificationData, **options: Any) -> IdentificationResult:
-        return identify_state_space(data, order=order, **options)
-
-    identify.__name__ = f"identify_blackbox_{order}"
-    identify.__doc__ = f"Black-box state-space model of order {order} (PO-MOESP + output error)."
-    return identify
-
-
-for _order in (4, 6):
-    register_identifier(Identifier(
-        f"blackbox-{_order}", f"black-box state-space model, {_order} states (thesis 4.8): "
-        "PO-MOESP subspace estimate refined by output error", _identifier(_order)))
 
 __all__ = ["fit_state_space", "identify_state_space", "moesp", "block_form", "BlockModel",
            "StateSpaceSimulator", "modes", "parameter_names", "physical_matrices"]

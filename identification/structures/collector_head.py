@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, field
-from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
@@ -176,7 +175,8 @@ def identify_collector_head(data: IdentificationData) -> CollectorHeadResult:
     """Identify the collector head from ``F_c``, ``y_cb`` and ``xi`` (thesis 4.3).
 
     Returns both PT2 fits (eqs. 4.15 and 4.16) with the mass, damping and stiffness they imply,
-    and the H1 estimates for the Bode plots (:func:`plot_collector_head`).
+    and the H1 estimates for the Bode plots
+    (:func:`panto.identification.structures.plots.plot_collector_head`).
     """
     force, cross_bar, head = head_signals(data)
     difference = cross_bar - head
@@ -202,42 +202,6 @@ def pt2_response(fit: HeadFit, frequency: np.ndarray, path: str = "force") -> np
     s = 2j * math.pi * np.asarray(frequency, float)
     denominator = fit.mass * s ** 2 + fit.damping * s + fit.stiffness
     return (1.0 if path == "force" else fit.mass * s ** 2) / denominator
-
-
-def plot_collector_head(result: CollectorHeadResult, out_png: str | Path) -> Path:
-    """Bode plots of the fits against the H1 estimates (thesis Figs. 4.5, 4.6), as a PNG."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    f = result.frequency[1:]
-    panels = [("F -> dY, eq. 4.15", result.response_force[1:], result.full, "force"),
-              ("y_cb -> dY, eq. 4.15", result.response_cross_bar[1:], result.full, "cross_bar"),
-              ("F -> dY, eq. 4.16", result.response_force_only[1:], result.force_only, "force")]
-    figure, axes = plt.subplots(2, 3, figsize=(13, 6.5), sharex=True)
-    for column, (title, measured, fit, path) in enumerate(panels):
-        model = pt2_response(fit, f, path)
-        axes[0, column].semilogx(f, 20 * np.log10(np.abs(measured)), color="0.6", label="H1 estimate")
-        axes[0, column].semilogx(f, 20 * np.log10(np.abs(model)), "k", label=(
-            f"PT2: m {fit.mass:.2f} kg, c {fit.damping:.1f} N s/m, k {fit.stiffness:.0f} N/m"))
-        axes[1, column].semilogx(f, np.degrees(np.unwrap(np.angle(measured))), color="0.6")
-        axes[1, column].semilogx(f, np.degrees(np.unwrap(np.angle(model))), "k")
-        axes[0, column].set_title(title)
-        axes[0, column].legend(fontsize=7)
-        for row in (0, 1):
-            axes[row, column].axvspan(result.reliable_up_to_hz, f[-1], color="0.93")
-            axes[row, column].grid(True, which="both", alpha=0.3)
-        axes[1, column].set_xlabel("frequency [Hz]")
-    axes[0, 0].set_ylabel("magnitude [dB]")
-    axes[1, 0].set_ylabel("phase [deg]")
-    figure.suptitle(f"Collector head {result.source} (shaded: above {result.reliable_up_to_hz:g} Hz)")
-    figure.tight_layout()
-    out = Path(out_png)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    figure.savefig(out, dpi=110)
-    plt.close(figure)
-    return out
 
 
 def identify_collector_head_result(data: IdentificationData, **options: Any):
@@ -269,16 +233,5 @@ def identify_collector_head_result(data: IdentificationData, **options: Any):
         details=result.to_dict())
 
 
-def _register() -> None:
-    from panto.identification.estimation.base import Identifier, register_identifier
-
-    register_identifier(Identifier(
-        "collector-head", "collector head alone (thesis 4.3): PT2 of eqs. 4.15/4.16 from the "
-        "head-cross-bar position difference, the force and the cross-bar position",
-        identify_collector_head_result, in_comparison=False))
-
-
-_register()
-
-__all__ = ["identify_collector_head", "plot_collector_head", "CollectorHeadResult", "HeadFit",
+__all__ = ["identify_collector_head", "CollectorHeadResult", "HeadFit",
            "simulate_head", "fit_head", "estimate_responses", "pt2_response", "head_signals"]

@@ -39,7 +39,7 @@ import numpy as np
 from scipy import linalg, signal
 
 from panto.identification.estimation.base import (IdentificationData, IdentificationError, IdentificationResult,
-                                 Identifier, ModelStructure, register_identifier)
+                                 ModelStructure)
 
 #: Model inputs and the outputs a structure can simulate.
 INPUT_NAMES = ("eta", "p")
@@ -430,23 +430,11 @@ def _identify_pareto(structure: OscillatorStructure, data: IdentificationData,
     return pareto.polish(chosen, data, executor=executor, progress=progress) if polish else chosen
 
 
-def _identifier(masses: int, friction: bool) -> Callable[..., IdentificationResult]:
-    def identify(data: IdentificationData, **options: Any) -> IdentificationResult:
-        return identify_oscillator(data, masses=masses, friction=friction, **options)
+def oscillator_from_data(data: IdentificationData, *, masses: int, friction: bool = False,
+                         **options: Any) -> OscillatorStructure:
+    """The nominal :class:`OscillatorStructure` on the outputs of `data` (options: its
+    constructor's)."""
+    return OscillatorStructure(masses, friction, outputs=data.output_names, **options)
 
-    identify.__name__ = f"identify_{masses}_mass" + ("_friction" if friction else "")
-    identify.__doc__ = (f"Fit the {masses}-mass oscillator" + (" with Coulomb friction" if friction
-                        else "") + "; options as :func:`identify_oscillator`.")
-    return identify
-
-
-for _masses, _friction, _text in (
-        (2, False, "two-mass oscillator (thesis 2.6, 4.6)"),
-        (2, True, "two-mass oscillator with Coulomb friction on both masses (thesis 2.7, 4.7)"),
-        (3, False, "three-mass oscillator (thesis 2.6, 4.6)"),
-        (3, True, "three-mass oscillator with Coulomb friction on every mass (thesis 2.7, 4.7)")):
-    register_identifier(Identifier(OscillatorStructure(_masses, _friction).name, _text,
-                                   _identifier(_masses, _friction)))
-
-__all__ = ["OscillatorStructure", "identify_oscillator", "offset_start", "discretise",
+__all__ = ["OscillatorStructure", "identify_oscillator", "oscillator_from_data", "offset_start", "discretise",
            "propagate", "coulomb_flow", "SUBSTEPS", "INPUT_NAMES", "OUTPUT_NAMES"]

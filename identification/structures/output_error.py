@@ -22,8 +22,8 @@ simulated in free run from rest. The references ``u_ref``, ``y_ref`` are the tra
 oscillator) this is exactly the polynomial OE model of Wigren & Schoukens (2013). The recursion
 needs ``n_k >= 1`` (no algebraic loop) and runs per sample in Python (about 2 us per sample).
 
-Registered as identifiers ``linear-2``, ``linear-4``, ``linear-6`` (``in_comparison=False``); any
-order through :func:`identify_linear_output_error` or the diagnosis' ``structure="linear-N"``.
+Listed in :mod:`panto.identification.structures.registry` as the family ``linear-N`` (members
+``linear-2``, ``linear-4``, ``linear-6`` shown; any order accepted; not in the comparison).
 """
 from __future__ import annotations
 
@@ -35,7 +35,7 @@ import numpy as np
 from scipy import signal as sps
 
 from panto.identification.estimation.base import (IdentificationData, IdentificationError, IdentificationResult,
-                                 Identifier, ModelStructure, register_identifier)
+                                 ModelStructure)
 
 #: Effects a linear OE model can take inside its dynamics, and the function ``phi``.
 FEEDBACK_EFFECTS = ("cubic_stiffness", "coulomb_friction", "offset")
@@ -298,18 +298,6 @@ def identify_linear_output_error(data: IdentificationData, *, order: int = 4, ex
     return fit_least_squares(structure, data, free=free, executor=executor, progress=progress,
                              **options)
 
-
-def _register(order: int) -> None:
-    def identify(data: IdentificationData, **options: Any) -> IdentificationResult:
-        return identify_linear_output_error(data, order=order, **options)
-
-    register_identifier(Identifier(
-        f"linear-{order}", f"linear output-error model of order {order} per output (any data)",
-        identify, in_comparison=False))
-
-
-for _order in (2, 4, 6):
-    _register(_order)
 
 __all__ = ["LinearOutputError", "linear_output_error_from_data", "estimate_arx",
            "identify_linear_output_error", "order_of", "FEEDBACK_EFFECTS"]

@@ -45,7 +45,7 @@ from typing import Any, Mapping, NamedTuple, Sequence
 import numpy as np
 
 from panto.identification.estimation.base import (IdentificationData, IdentificationError, IdentificationResult,
-                                 Identifier, ModelStructure, register_identifier)
+                                 ModelStructure)
 from panto.identification.data.datasets import delay_signal
 from panto.identification.structures.linearisation import (INDEX as _INDEX, discretise, linearise,
                                           parameter_defaults as _parameter_defaults, propagate,
@@ -390,13 +390,16 @@ def identify_nonlinear(data: IdentificationData, **options: Any) -> Identificati
     return _identify(PhysicalNonlinear, data, **options)
 
 
-register_identifier(Identifier(
-    "physical-linear", "physical model (Table 4.1), linearised about its equilibrium for every "
-    "candidate (thesis 4.1.3, 4.5)", identify_linear))
-register_identifier(Identifier(
-    "physical", "nonlinear physical model (Table 4.1), the Pantograph FMU in the loop",
-    identify_nonlinear))
+def linear_from_data(data: IdentificationData, **options: Any) -> PhysicalLinear:
+    """The nominal :class:`PhysicalLinear` on the outputs of `data` (options: its constructor's)."""
+    return PhysicalLinear(outputs=data.output_names, **options)
+
+
+def nonlinear_from_data(data: IdentificationData, **options: Any) -> PhysicalNonlinear:
+    """The nominal :class:`PhysicalNonlinear` on the outputs of `data` (options: its constructor's)."""
+    return PhysicalNonlinear(outputs=data.output_names, **options)
 
 __all__ = ["PhysicalLinear", "PhysicalNonlinear", "TABLE_4_1", "EXTENSIONS", "DELAY", "BOUNDS",
-           "EN50318_CONTACT_STIFFNESS", "identify_linear", "identify_nonlinear", "linearise",
+           "EN50318_CONTACT_STIFFNESS", "identify_linear", "identify_nonlinear", "linear_from_data",
+           "nonlinear_from_data", "linearise",
            "solve_equilibrium", "static_functions"]

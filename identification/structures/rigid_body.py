@@ -14,7 +14,8 @@ It is an equation-error structure: the "simulation" is the force computed from t
 motion, so it is linear in the parameters and least squares solves it in one step. The Coulomb
 term is the diagnosis' ``coulomb_friction`` augmentation (:meth:`RigidBody.with_effect`).
 
-Registered as the identifier ``rigid-body`` (``in_comparison=False``).
+Listed in :mod:`panto.identification.structures.registry` as ``rigid-body`` (not in the
+comparison).
 """
 from __future__ import annotations
 
@@ -25,7 +26,7 @@ import numpy as np
 from scipy import signal as sps
 
 from panto.identification.estimation.base import (IdentificationData, IdentificationError, IdentificationResult,
-                                 Identifier, ModelStructure, register_identifier)
+                                 ModelStructure)
 
 #: Effects the rigid body takes inside its force equation.
 RIGID_BODY_EFFECTS = ("coulomb_friction",)
@@ -150,10 +151,6 @@ def identify_rigid_body(data: IdentificationData, *, executor=None, progress=Non
     return fit_least_squares(structure, data.select_outputs(structure.output_names), free=free,
                              executor=executor, progress=progress, **options)
 
-
-register_identifier(Identifier(
-    "rigid-body", "rigid-body inverse dynamics F = M q'' + F_v q' + F_0 from a measured position "
-    "(equation error; EMPS-like axes)", identify_rigid_body, in_comparison=False))
 
 __all__ = ["RigidBody", "rigid_body_from_data", "identify_rigid_body", "motion",
            "RIGID_BODY_EFFECTS"]
