@@ -31,7 +31,7 @@ sys.path.insert(0, str(HERE.parent))
 
 from panto.identification.design.constraints import RigInputConstraints
 from panto.identification.design.pantograph import DesignOptions, design_pantograph_experiment
-from panto.identification.design.profiles import compare_on_virtual_rig
+from panto.identification.design.profiles import VirtualRigOptions, compare_on_virtual_rig
 from panto.identification.design.pantograph_sensitivity import LinearisedPantograph
 
 FREE = ("m_c", "c_c", "k_c", "k_p", "c1", "m1")
@@ -50,7 +50,7 @@ def run(duration: float, generations: int, population: int, out: Path, seed: int
                                           options=DesignOptions(population, generations, seed))
     design_time = time.perf_counter() - began
     began = time.perf_counter()
-    comparison = compare_on_virtual_rig(design, out, seed=seed,
+    comparison = compare_on_virtual_rig(design, out, options=VirtualRigOptions(seed=seed),
                                         progress=lambda line: print(line, flush=True))
     return {"date": datetime.now(UTC).isoformat(timespec="seconds"),
             "machine": f"{platform.processor() or platform.machine()}, {os.cpu_count()} cores, "

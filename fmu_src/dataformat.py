@@ -11,7 +11,8 @@ A simulation result (:class:`panto.fmu_src.response.TimeResponse`) and a rig run
   (:func:`metadata_path_for`), written atomically (:func:`write_side_file`) and read back with
   a clear error (:func:`read_side_file`);
 - **Parquet** or **MATLAB .mat** instead of CSV, chosen by the file's suffix
-  (:data:`DATA_SUFFIXES`, :func:`data_suffix`); the rig's datasets use all three.
+  (:data:`DATA_SUFFIXES`, :func:`data_suffix`, case-insensitive: ``.CSV`` is ``.csv``); the rig's
+  datasets use all three. Plain tables may also be HDF5 (:data:`TABLE_SUFFIXES`).
 """
 from __future__ import annotations
 
@@ -30,6 +31,8 @@ TIME_NAME = "time"
 TIME_UNIT = "s"
 #: Suffixes of the data files, by format.
 DATA_SUFFIXES = (".csv", ".parquet", ".mat")
+#: Suffixes of plain tables (identification data from any source): the data files and HDF5.
+TABLE_SUFFIXES = DATA_SUFFIXES + (".h5", ".hdf5")
 _HEADER_PATTERN = re.compile(r"^(?P<name>.+?) \[(?P<unit>[^\[\]]*)\]$")
 
 
@@ -124,15 +127,17 @@ def read_side_file(csv_path: str | Path) -> Any:
         raise DataFormatError(f"{side}: not valid JSON ({error})") from None
 
 
-def data_suffix(path: str | Path, what: str = "dataset") -> str:
-    """The suffix of a data file (one of :data:`DATA_SUFFIXES`), or a clear error."""
-    suffix = Path(path).suffix
-    if suffix not in DATA_SUFFIXES:
-        raise DataFormatError(f"{path}: unknown {what} format {suffix!r}; use one of "
-                              f"{sorted(DATA_SUFFIXES)}")
+def data_suffix(path: str | Path, what: str = "dataset",
+                suffixes: Sequence[str] = DATA_SUFFIXES) -> str:
+    """The suffix of a data file in lower case (one of `suffixes`: ``.CSV`` gives ``.csv``), or
+    a clear error naming the file and the accepted suffixes."""
+    suffix = Path(path).suffix.lower()
+    if suffix not in suffixes:
+        raise DataFormatError(f"{path}: unknown {what} format {Path(path).suffix!r}; use one of "
+                              f"{sorted(suffixes)}")
     return suffix
 
 
-__all__ = ["TIME_NAME", "TIME_UNIT", "DATA_SUFFIXES", "DataFormatError", "format_header",
-           "parse_header", "csv_header", "format_csv_row", "csv_read_options", "json_default",
-           "metadata_path_for", "write_side_file", "read_side_file", "data_suffix"]
+__all__ = ["TIME_NAME", "TIME_UNIT", "DATA_SUFFIXES", "TABLE_SUFFIXES", "DataFormatError",
+           "format_header", "parse_header", "csv_header", "format_csv_row", "csv_read_options",
+           "json_default", "metadata_path_for", "write_side_file", "read_side_file", "data_suffix"]

@@ -3,7 +3,9 @@
 * ``panto compare TRAIN VALIDATION [--structures ...] [--workers N] [--out FOLDER] [--json FILE]``
   fits every model structure on the training run, validates it on the validation run and prints
   the thesis' table; ``--out`` writes the table (Markdown, CSV, JSON), the bar chart of the fits
-  and one validation plot per structure.
+  and one validation plot per structure. Rig runs use the rig mapping; any table takes the data
+  options of ``panto diagnose`` (``--inputs``/``--outputs NAME=COLUMN``, ``--sample-rate``,
+  ``--train-samples``/``--validate-samples``, ``--rate``; :mod:`panto.data_options`).
 * ``panto sensitivity [--parameters FILE] [--eta 2.0] [--p 4.0] [--out PNG] [--json FILE]``:
   eigenvalues of the linearised pantograph with each Table 4.1 parameter scaled by 0.9 and 1.1,
   ranked by influence.
@@ -17,17 +19,17 @@ from pathlib import Path
 from typing import Callable
 
 from panto.console import say
+from panto.data_options import add_data_options, load_data
 
 
 def run_compare(args: argparse.Namespace) -> int:
     """Fit the structures on TRAIN, validate on VALIDATION, print and write the table."""
     from panto.identification.estimation.comparison import compare_structures
     from panto.identification.estimation.plots import plot_comparison, plot_validation
-    from panto.identification.data.datasets import pantograph_data
     from panto.identification.structures.registry import comparison_identifiers
 
-    train = pantograph_data(args.train, rate=args.rate)
-    validation = pantograph_data(args.validation, rate=args.rate)
+    train = load_data(args.train, args, rig_mapping=True)
+    validation = load_data(args.validation, args, validation=True, rig_mapping=True)
     say(f"training {args.train}: {len(train)} samples at {1 / train.sample_period:.0f} Hz; "
         f"validation {args.validation}: {len(validation)} samples")
     pool = ProcessPoolExecutor(args.workers) if args.workers and args.workers > 1 \
@@ -98,13 +100,13 @@ def register(add: Callable) -> None:
     """Declare ``compare`` and ``sensitivity`` with ``add(name, handler, help)``."""
     p = add("compare", run_compare, "fit every model structure on a training run, validate on "
             "a validation run: the thesis' table (section 4.8)")
-    p.add_argument("train", help="training run folder or dataset file (APRBS)")
-    p.add_argument("validation", help="validation run folder or dataset file (ramps)")
+    p.add_argument("train", help="training run folder or table (APRBS)")
+    p.add_argument("validation", help="validation run folder or table (ramps)")
     p.add_argument("--structures", nargs="+", help="structure names (default: all in the "
                    "comparison, e.g. physical-linear three-mass blackbox-4)")
     p.add_argument("--workers", type=int, default=1,
                    help="processes evaluating populations / Jacobians in parallel (default 1)")
-    p.add_argument("--rate", type=float, default=50.0, help="identification rate [Hz] (50)")
+    add_data_options(p)
     p.add_argument("--out", help="folder for the table (md, csv, json), plots, parameter files")
     p.add_argument("--json", help="write the table as JSON to this file")
 

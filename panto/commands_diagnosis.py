@@ -12,7 +12,9 @@ it, and how far the gap shrinks once it is in the model.
   column needs ``--sample-rate``; ``--rate`` decimates (zero-phase low-pass first);
   ``--train-samples``/``--validate-samples START:STOP`` select rows (e.g. two parts of one file).
 
-The loading is the library's :func:`panto.identification.data.loading.load_identification_data`.
+The data options are :mod:`panto.data_options` (shared with ``panto identify`` and ``panto
+compare``); the loading is the library's
+:func:`panto.identification.data.loading.load_identification_data`.
 """
 from __future__ import annotations
 
@@ -22,17 +24,8 @@ from pathlib import Path
 from typing import Any, Callable
 
 from panto.console import say
-
-
-def _pairs(items: list[str] | None, flag: str) -> dict[str, str]:
-    out = {}
-    for item in items or []:
-        for part in item.split(","):
-            name, sep, value = part.partition("=")
-            if not sep or not name.strip() or not value.strip():
-                raise ValueError(f"{flag} {part!r}: expected NAME=VALUE")
-            out[name.strip()] = value.strip()
-    return out
+from panto.data_options import add_data_options, load_data
+from panto.data_options import parse_pairs as _pairs
 
 
 def _value(text: str) -> Any:
@@ -49,23 +42,12 @@ def _value(text: str) -> Any:
     return text
 
 
-def _rows(text: str | None) -> slice:
-    if not text:
-        return slice(None)
-    start, _, stop = text.partition(":")
-    return slice(int(start) if start else None, int(stop) if stop else None)
-
-
-def _load(path: str, args: argparse.Namespace, rows: slice):
-    """One run's IdentificationData from the options (module notes)."""
-    from panto.identification.data.loading import LoadOptions, load_identification_data
+def _load(path: str, args: argparse.Namespace, validation: bool):
+    """One run's IdentificationData from the shared data options (module notes)."""
     from panto.identification.structures.registry import is_pantograph_structure
 
-    options = LoadOptions(inputs=_pairs(args.inputs, "--inputs"),
-                          outputs=_pairs(args.outputs, "--outputs"), rate=args.rate,
-                          sample_rate=args.sample_rate, rows=rows, eta_offset=args.eta_offset,
-                          rig_mapping=is_pantograph_structure(args.model))
-    return load_identification_data(path, options)
+    return load_data(path, args, validation=validation,
+                     rig_mapping=is_pantograph_structure(args.model))
 
 
 def _roles(text: str | None):
@@ -89,8 +71,8 @@ def run_diagnose(args: argparse.Namespace) -> int:
     from panto.identification.diagnosis.report import write_report
     from panto.identification.diagnosis.effects import EFFECTS
 
-    train = _load(args.train, args, _rows(args.train_samples))
-    validation = _load(args.validate, args, _rows(args.validate_samples))
+    train = _load(args.train, args, validation=False)
+    validation = _load(args.validate, args, validation=True)
     options = {k: _value(v) for k, v in _pairs(args.option, "--option").items()}
     if args.free:
         options["free"] = tuple(args.free)
@@ -144,13 +126,7 @@ def register(add: Callable) -> None:
     p.add_argument("--validate", required=True, help="withheld validation run")
     p.add_argument("--model", required=True, help="nominal structure: physical, physical-linear, "
                    "two-mass, three-mass, linear-N, rigid-body")
-    p.add_argument("--inputs", nargs="*", help="NAME=CHANNEL (any data)")
-    p.add_argument("--outputs", nargs="*", help="NAME=CHANNEL (any data)")
-    p.add_argument("--rate", type=float, help="identification rate [Hz] (rig runs: 50)")
-    p.add_argument("--sample-rate", type=float, help="rate of a table without a time column")
-    p.add_argument("--train-samples", help="rows START:STOP of the training file")
-    p.add_argument("--validate-samples", help="rows START:STOP of the validation file")
-    p.add_argument("--eta-offset", type=float, help="rig runs: height of the motor's zero [m]")
+    add_data_options(p)
     p.add_argument("--roles", help="position=..,velocity=..,force=..,actuators=a+b")
     p.add_argument("--candidates", nargs="*", help="subset of the effect vocabulary")
     p.add_argument("--free", nargs="*", help="free parameters of the nominal")

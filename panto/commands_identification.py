@@ -2,8 +2,16 @@
 
 ``panto identify RUN --model physical-linear [--validate RUN] [--free a b] [--fix k_ph=50000]
 [--method lm|nsga2] [--multistart N] [--workers N] [--out DIR] [--json FILE] [--rate 50]
-[--start S --stop S]`` prints the progress, a table (parameter, value, std, nominal) and the fits,
-and writes the parameter file, the result JSON and the plot into ``--out``.
+[--start S --stop S] [--keep-unidentifiable]`` prints the progress, a table (parameter, value,
+unit, std, 95 % interval, nominal, verdict) and the fits, and writes the parameter file, the result
+JSON, its markdown summary and the plot into ``--out``. With ``lm``, parameters the run cannot
+pin are fixed at their prior and the rest refitted, unless ``--keep-unidentifiable``.
+
+The data are a rig run (the rig mapping eta, p -> F_c, y_cb when no columns are named) or any
+table with ``--inputs NAME=COLUMN ... --outputs NAME=COLUMN ...`` (``--sample-rate``,
+``--train-samples``/``--validate-samples``: the options of ``panto diagnose``,
+:mod:`panto.data_options`), e.g. ``panto identify train.csv --model two-mass --inputs eta=height
+p=pressure --outputs F_c=force``.
 """
 from __future__ import annotations
 
@@ -14,6 +22,7 @@ from pathlib import Path
 from typing import Callable
 
 from panto.console import say
+from panto.data_options import add_data_options, load_data
 
 
 def _fixed(items: list[str] | None) -> dict[str, float]:
@@ -40,23 +49,24 @@ def _executor(workers: int):
 def run_identify(args: argparse.Namespace) -> int:
     """Load the runs, fit, print, write."""
     from panto.identification.structures.registry import identifier, parameter_set
-    from panto.identification.data.datasets import pantograph_data
     from panto.identification.estimation.reporting import write_identification
 
-    def load(path: str):
-        return pantograph_data(path, rate=args.rate, eta_offset=args.eta_offset, start=args.start,
-                               stop=args.stop, cross_bar=args.cross_bar,
-                               position_latency=args.position_latency,
-                               outputs=("F_c", "y_cb", "xi") if args.model == "collector-head"
-                               else ("F_c", "y_cb"))
+    def load(path: str, validation: bool):
+        return load_data(path, args, validation=validation, rig_mapping=True, start=args.start,
+                         stop=args.stop, cross_bar=args.cross_bar,
+                         position_latency=args.position_latency,
+                         rig_outputs=("F_c", "y_cb", "xi") if args.model == "collector-head"
+                         else ("F_c", "y_cb"))
 
-    data = load(args.dataset)
-    validation = load(args.validate) if args.validate else None
+    data = load(args.dataset, False)
+    validation = load(args.validate, True) if args.validate else None
     options = {"fixed": _fixed(args.fix), "method": args.method}
     if args.free:
         options["free"] = args.free
     if args.method == "lm":
         options.update(multistart=args.multistart, max_evaluations=args.max_evaluations)
+        if not args.model.startswith(("blackbox-", "collector-head")):
+            options["fix_unidentifiable"] = not args.keep_unidentifiable
         if args.multistart:
             import numpy as np
 
@@ -113,8 +123,19 @@ def _nominal(model: str) -> dict[str, float] | None:
 
 def _print_result(result, validation) -> None:
     nominal = _nominal(result.structure) or {}
-    say(f"{'parameter':>10} {'value':>12} {'std':>10} {'nominal':>12}")
-    for name in result.free:
+    if result.estimates:
+        say(f"{'parameter':>10} {'value':>12} {'unit':<10} {'std':>10} {'95 % interval':>24} "
+            f"{'nominal':>12}  verdict")
+    else:
+        say(f"{'parameter':>10} {'value':>12} {'std':>10} {'nominal':>12}")
+    for name, e in result.estimates.items():
+        interval = f"[{e.interval_95[0]:.4g}, {e.interval_95[1]:.4g}]" if not e.at_bound and \
+            not e.fixed else ""
+        verdict = e.status if e.fixed else e.verdict if not e.at_bound else \
+            f"{e.verdict}: {e.status}"
+        say(f"{name:>10} {e.value:12.5g} {e.unit:<10} {e.std:10.3g} {interval:>24} "
+            f"{nominal.get(name, math.nan):12.5g}  {verdict}")
+    for name in [] if result.estimates else result.free:
         value, std = result.parameters[name], result.std.get(name, math.nan)
         say(f"{name:>10} {value:12.5g} {std:10.3g} {nominal.get(name, math.nan):12.5g}")
     say("fit on training: " + ", ".join(f"{k} {v:.1f} %" for k, v in result.fit.items()))
@@ -122,8 +143,12 @@ def _print_result(result, validation) -> None:
         fits = result.fit_on(validation, [o for o in result.fit if o in validation.output_names])
         say("fit on validation: " + ", ".join(f"{k} {v:.1f} %" for k, v in fits.items()))
     weak = (result.details.get("identifiability") or {}).get("not_identifiable") or {}
-    for name, why in weak.items():
-        say(f"not identifiable: {name}: {why}")
+    for name, why in {**weak, **result.details.get("fixed_at_prior", {})}.items():
+        fixed = " (fixed at prior)" if name in result.details.get("fixed_at_prior", {}) else ""
+        say(f"not identifiable{fixed}: {name}: {why}")
+    for name, e in result.estimates.items():
+        if e.at_bound:
+            say(f"at {e.at_bound} bound: {name}: {e.reason}")
     say(f"{'' if result.success else 'FAILED: '}{result.message} "
         f"({result.n_evaluations} evaluations, {result.wall_time:.1f} s)")
 
@@ -131,25 +156,27 @@ def _print_result(result, validation) -> None:
 def register(add: Callable[..., argparse.ArgumentParser]) -> None:
     """Declare ``panto identify``."""
     p = add("identify", run_identify, "fit a model structure to a rig run (thesis chapter 4)")
-    p.add_argument("dataset", help="run folder or dataset file (training)")
+    p.add_argument("dataset", help="training data: run folder, or a table (.csv, .parquet, "
+                   ".mat, .h5) with --inputs/--outputs")
     p.add_argument("--model", default="physical-linear",
                    help="structure: physical, physical-linear, two-mass, ... (default "
                         "physical-linear)")
-    p.add_argument("--validate", help="run folder or dataset file for validation")
+    p.add_argument("--validate", help="validation data (run folder or table, same columns)")
     p.add_argument("--free", nargs="+", help="parameters to estimate (default: the structure's)")
     p.add_argument("--fix", nargs="+", metavar="NAME=VALUE", help="parameters held fixed")
     p.add_argument("--method", default="lm", choices=("lm", "nsga2"))
     p.add_argument("--multistart", type=int, default=0, help="extra LM runs from random starts")
     p.add_argument("--seed", type=int, default=None, help="seed of the multistart points")
     p.add_argument("--max-evaluations", type=int, default=2000)
+    p.add_argument("--keep-unidentifiable", action="store_true",
+                   help="lm: leave parameters the run cannot pin free (default: fix them at their "
+                        "prior and refit, reported as 'fixed at prior')")
     p.add_argument("--workers", type=int, default=1, help="processes for the evaluations")
     p.add_argument("--out", help="folder for parameters.json, result.json and fit.png")
     p.add_argument("--json", help="also write the result summary as JSON")
-    p.add_argument("--rate", type=float, default=50.0, help="identification rate [Hz]")
+    add_data_options(p)
     p.add_argument("--start", type=float, help="start of the time window [s]")
     p.add_argument("--stop", type=float, help="end of the time window [s]")
-    p.add_argument("--eta-offset", type=float, help="height of the motor's zero [m] (default "
-                   "from the run's metadata)")
     p.add_argument("--cross-bar", default="laser", choices=("laser", "video"))
     p.add_argument("--position-latency", type=float,
                    help="how late the drive reports the slider position [s] (default: the run's "

@@ -33,10 +33,12 @@ def identify_models(state: dict[str, Any], progress: Progress) -> dict:
     validation = pantograph_data(state["runs"]["validation"], rate=50.0)
     state["data"] = (train, validation)
     limit = {"max_evaluations": settings.max_evaluations} if settings.max_evaluations else {}
-    table = compare_structures(train, validation,
-                               structures=comparison_identifiers(settings.structures),
-                               progress=progress,
-                               options={"physical-linear": limit} if limit else None)
+    identifiers = comparison_identifiers(settings.structures)
+    # what the run cannot pin is fixed at its prior rather than run to a bound
+    physical_options = {**limit, "fix_unidentifiable": True}
+    table = compare_structures(train, validation, structures=identifiers, progress=progress,
+                               options={"physical-linear": physical_options} if any(
+                                   i.name == "physical-linear" for i in identifiers) else None)
     folder = out / "comparison"
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "comparison.md").write_text(table.to_markdown() + "\n")
@@ -63,7 +65,10 @@ def identify_models(state: dict[str, Any], progress: Progress) -> dict:
                      "nominal_fit_validation": nominal_fit,
                      "parameter_file": str(paths["parameters"].relative_to(out)),
                      "not_identifiable": (result.details.get("identifiability") or {})
-                     .get("not_identifiable") or {}},
+                     .get("not_identifiable") or {},
+                     "estimates": [e.to_dict() for e in result.estimates.values()],
+                     "fixed_at_prior": dict(result.details.get("fixed_at_prior", {})),
+                     "verdict_rule": (result.details.get("identifiability") or {}).get("rule")},
         "plots": {"fit": "identification/fit.png", "comparison": "comparison/comparison.png"}}
     progress("physical-linear on validation: " + ", ".join(
         f"{o} {row.fit_validation[o]:.1f} % (nominal {nominal_fit[o]:.1f} %)"

@@ -149,60 +149,16 @@ def _fits(fits: Mapping[str, Any] | None) -> str:
 
 def _summary_page(summary: Mapping[str, Any]) -> str:
     rows = []
-    fmus = summary.get("fmus")
-    if fmus:
-        valid = sum(f["valid"] for f in fmus["fmus"])
-        rows.append(("FMUs built and validated (fmpy)", f"{valid} of {fmus['count']} valid"))
-    rig = summary.get("rig")
-    if rig:
-        rows.append(("Rig campaign (virtual test bed, imperfections on)", "; ".join(
-            f"{k}: {v['profile']} {v['duration_s']:g} s" for k, v in rig["runs"].items())))
-        nominal = rig["nominal_model_fit_percent"].get("validation", {}).get("Pantograph", {})
-        rows.append(("Nominal model on the validation run (500 Hz)", _fits(nominal)))
-    video = summary.get("video")
-    if video:
-        rms = [v["video_vs_laser"]["rms_mm"] for v in video["runs"].values()]
-        rows.append(("Video synchronisation (LED)",
-                     (f"lowest confidence {video['min_sync_confidence']:.3f}; video vs laser "
-                     f"cross bar RMS {', '.join(_number(r, 2) for r in rms)} mm")))
-    ident = summary.get("identification")
-    if ident:
-        physical = ident["physical"]
-        rows.append(("Physical model identified (physical-linear, LM): training",
-                     _fits(physical["fit_training"])))
-        rows.append(("… validation (identified / nominal at 50 Hz)",
-                     (f"{_fits(physical['fit_validation'])} / "
-                     f"{_fits(physical['nominal_fit_validation'])}")))
-        ranking = ident["comparison"]["ranking_validation"]
-        rows.append(("Best structure on validation", ranking[0] if ranking else "–"))
-    diagnosis = summary.get("diagnosis")
-    if diagnosis:
-        closed = ", ".join(f"{k} {100 * v:.0f} %" for k, v in diagnosis["gap_closed"].items()
-                           if v is not None)
-        rows.append(("Sim-to-real diagnosis", f"{diagnosis['verdict']} "
-                     f"{diagnosis['effects'] or ''}; validation fit "
-                     + ", ".join(f"{o} {_number(diagnosis['fit_before'][o])} → "
-                                 f"{_number(diagnosis['fit_after'][o])} %"
-                                 for o in diagnosis["fit_before"])
-                     + (f"; residual energy removed: {closed}" if closed else "")))
-    doe = summary.get("doe")
-    if doe:
-        rows.append(("Next rig run (D-optimal design)",
-                     (f"{doe['duration_s']:g} s; parameter std of an APRBS / designed: median "
-                     f"{doe['median_std_ratio']:.2f}× (det ratio per parameter "
-                     f"{doe['det_ratio_per_parameter']:.2f})")))
-    cosim = summary.get("cosim")
-    if cosim:
-        rows.append((f"EN 50318 line at {cosim['speed_kmh']:g} km/h",
-                     f"identified pantograph: {cosim['inside']} of {len(cosim['statistics'])} "
-                     "statistics inside the acceptance ranges"
-                     + (f"; EN 50318 reference pantograph (line check): "
-                        f"{cosim['reference_inside']} of {len(cosim['statistics'])}"
-                        if cosim.get("reference_inside") is not None else "")
-                     + " (table below)"))
+    for key, section_rows in (("fmus", _fmu_rows), ("rig", _rig_rows), ("video", _video_rows),
+                              ("identification", _identification_rows),
+                              ("diagnosis", _diagnosis_rows), ("doe", _doe_rows),
+                              ("cosim", _cosim_rows)):
+        if summary.get(key):
+            rows += section_rows(summary[key])
     failed = summary.get("failed_steps") or []
     rows.append(("Steps failed", ", ".join(failed) if failed else "none"))
     parts = ["<div class='summary'><h2>Summary</h2>", table(("what", "result"), rows)]
+    ident, cosim = summary.get("identification"), summary.get("cosim")
     if ident:
         parts += [("<h3>Model structures (fit on training, then on the withheld validation "
                   "run)</h3>"), markdown_table(ident["comparison_markdown"])]
@@ -211,6 +167,67 @@ def _summary_page(summary: Mapping[str, Any]) -> str:
                   "pantograph</h3>"), _cosim_table(cosim)]
     parts.append("</div>")
     return "\n".join(parts)
+
+
+Rows = list[tuple[str, str]]
+
+
+def _fmu_rows(fmus: Mapping[str, Any]) -> Rows:
+    valid = sum(f["valid"] for f in fmus["fmus"])
+    return [("FMUs built and validated (fmpy)", f"{valid} of {fmus['count']} valid")]
+
+
+def _rig_rows(rig: Mapping[str, Any]) -> Rows:
+    nominal = rig["nominal_model_fit_percent"].get("validation", {}).get("Pantograph", {})
+    return [("Rig campaign (virtual test bed, imperfections on)", "; ".join(
+                f"{k}: {v['profile']} {v['duration_s']:g} s" for k, v in rig["runs"].items())),
+            ("Nominal model on the validation run (500 Hz)", _fits(nominal))]
+
+
+def _video_rows(video: Mapping[str, Any]) -> Rows:
+    rms = [v["video_vs_laser"]["rms_mm"] for v in video["runs"].values()]
+    return [("Video synchronisation (LED)",
+             (f"lowest confidence {video['min_sync_confidence']:.3f}; video vs laser "
+              f"cross bar RMS {', '.join(_number(r, 2) for r in rms)} mm"))]
+
+
+def _identification_rows(ident: Mapping[str, Any]) -> Rows:
+    physical = ident["physical"]
+    ranking = ident["comparison"]["ranking_validation"]
+    return [("Physical model identified (physical-linear, LM): training",
+             _fits(physical["fit_training"])),
+            ("… validation (identified / nominal at 50 Hz)",
+             (f"{_fits(physical['fit_validation'])} / "
+              f"{_fits(physical['nominal_fit_validation'])}")),
+            ("Best structure on validation", ranking[0] if ranking else "–")]
+
+
+def _diagnosis_rows(diagnosis: Mapping[str, Any]) -> Rows:
+    closed = ", ".join(f"{k} {100 * v:.0f} %" for k, v in diagnosis["gap_closed"].items()
+                       if v is not None)
+    return [("Sim-to-real diagnosis", f"{diagnosis['verdict']} "
+             f"{diagnosis['effects'] or ''}; validation fit "
+             + ", ".join(f"{o} {_number(diagnosis['fit_before'][o])} → "
+                         f"{_number(diagnosis['fit_after'][o])} %"
+                         for o in diagnosis["fit_before"])
+             + (f"; residual energy removed: {closed}" if closed else ""))]
+
+
+def _doe_rows(doe: Mapping[str, Any]) -> Rows:
+    return [("Next rig run (D-optimal design)",
+             (f"{doe['duration_s']:g} s; parameter std of an APRBS / designed: median "
+              f"{doe['median_std_ratio']:.2f}× (det ratio per parameter "
+              f"{doe['det_ratio_per_parameter']:.2f})"))]
+
+
+def _cosim_rows(cosim: Mapping[str, Any]) -> Rows:
+    return [(f"EN 50318 line at {cosim['speed_kmh']:g} km/h",
+             f"identified pantograph: {cosim['inside']} of {len(cosim['statistics'])} "
+             "statistics inside the acceptance ranges"
+             + (f"; EN 50318 reference pantograph (line check): "
+                f"{cosim['reference_inside']} of {len(cosim['statistics'])}"
+                if cosim.get("reference_inside") is not None else "")
+             + " (table below)")]
 
 
 def _cosim_table(cosim: Mapping[str, Any]) -> str:
@@ -268,18 +285,38 @@ def _video_section(video: Mapping[str, Any], out: Path, embed: bool) -> list[str
     return parts
 
 
+def _estimates_table(physical: Mapping[str, Any]) -> list[str]:
+    """Value, unit, ±, 95 % interval and verdict per fitted parameter; what was fixed and why."""
+    estimates = physical.get("estimates") or []
+    if not estimates:  # a summary written before the per-parameter records
+        rows = [(name, f"{value:.5g}", _number(physical["std"].get(name), 3))
+                for name, value in physical["parameters"].items()]
+        return [table(("parameter", "identified", "std"), rows)]
+    def interval(e: Mapping[str, Any]) -> str:
+        low, high = e["interval_95"]
+        return "–" if low is None or high is None else f"[{low:.4g}, {high:.4g}]"
+    rows = [(e["name"], f"{e['value']:.5g}", e["unit"],
+             f"{e['std']:.3g}" if e["std"] is not None else "–", interval(e),
+             e["verdict"] if e["status"] == "estimated" else f"{e['verdict']}; {e['status']}")
+            for e in estimates]
+    parts = [table(("parameter", "value", "unit", "± (1 σ)", "95 % interval", "verdict"), rows)]
+    fixed = physical.get("fixed_at_prior") or {}
+    if fixed:
+        parts.append("<p>Fixed at their prior (not identifiable from this run), the rest "
+                     "refitted: " + _e("; ".join(f"{n}: {why}" for n, why in fixed.items()))
+                     + "</p>")
+    if physical.get("verdict_rule"):
+        parts.append(f"<p><small>Verdicts: {_e(physical['verdict_rule'])}.</small></p>")
+    return parts
+
+
 def _identification_section(ident: Mapping[str, Any], out: Path, embed: bool) -> list[str]:
     parts = []
     physical = ident["physical"]
     parts.append(markdown_table(ident["comparison_markdown"]))
     parts.append(_image(out, ident["plots"]["comparison"], embed, "fits per structure"))
-    rows = [(name, f"{value:.5g}", _number(physical["std"].get(name), 3))
-            for name, value in physical["parameters"].items()]
     parts.append(f"<h3>Physical model (parameter file {_e(physical['parameter_file'])})</h3>")
-    parts.append(table(("parameter", "identified", "std"), rows))
-    weak = physical.get("not_identifiable") or {}
-    if weak:
-        parts.append("<p>Not identifiable from this run: " + _e(", ".join(weak)) + "</p>")
+    parts += _estimates_table(physical)
     parts.append(_image(out, ident["plots"]["fit"], embed, "identified physical model"))
     pareto = ident.get("pareto") or {}
     if "plot" in pareto:

@@ -19,7 +19,8 @@ from panto.identification.design.oscillator import (
     two_sine_input,
 )
 from panto.identification.design.fisher import cramer_rao_covariance, fisher_information
-from panto.identification.design.input_design import GeneticOptions, InputConstraints, design_offline
+from panto.identification.design.input_design import (GeneticOptions, InputConstraints,
+                                                       OfflineOptions, design_offline)
 from panto.identification.design.online_design import OnlineOptions, SimulatedPlant, design_online
 
 CONSTRAINTS = InputConstraints.symmetric(1.5, 0.25)
@@ -46,8 +47,9 @@ def _crb(inputs, theta=THETA_TRUE):
 @pytest.fixture(scope="module")
 def offline():
     return design_offline(MODEL, THETA_INIT, two_sine_input(N_SHORT), CONSTRAINTS,
-                          noise_variance=NOISE_VARIANCE,
-                          options=GeneticOptions(population=30, generations=60))
+                          options=OfflineOptions(noise_variance=NOISE_VARIANCE,
+                                                 genetic=GeneticOptions(population=30,
+                                                                        generations=60)))
 
 
 def test_zero_order_hold_gives_the_thesis_parameters_to_four_decimals():
@@ -106,9 +108,10 @@ def test_offline_design_respects_the_limits_and_beats_the_sine_input(offline):
 
 
 def test_a_criterion_design_lowers_the_mean_variance():
-    design = design_offline(MODEL, THETA_INIT, two_sine_input(60), CONSTRAINTS, criterion="A",
-                            noise_variance=NOISE_VARIANCE,
-                            options=GeneticOptions(population=20, generations=20, seed=3))
+    design = design_offline(MODEL, THETA_INIT, two_sine_input(60), CONSTRAINTS,
+                            options=OfflineOptions("A", NOISE_VARIANCE,
+                                                   GeneticOptions(population=20, generations=20,
+                                                                  seed=3)))
     _assert_feasible(design.inputs)
     assert design.value < design.start_value
     assert np.trace(design.covariance) == pytest.approx(design.value, rel=1e-9)
@@ -119,8 +122,8 @@ def test_online_design_respects_the_limits_learns_theta_and_beats_the_sine_input
     plant = SimulatedPlant(MODEL, THETA_TRUE, np.sqrt(NOISE_VARIANCE), np.random.default_rng(2))
     lines = []
     design = design_online(MODEL, plant, THETA_INIT, two_sine_input(n), CONSTRAINTS,
-                           noise_variance=NOISE_VARIANCE, progress=lines.append,
-                           options=OnlineOptions(horizon=20,
+                           progress=lines.append,
+                           options=OnlineOptions(noise_variance=NOISE_VARIANCE, horizon=20,
                                                  genetic=GeneticOptions(population=10,
                                                                         generations=4)))
     _assert_feasible(design.inputs)

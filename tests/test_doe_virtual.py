@@ -18,15 +18,15 @@ def test_designed_run_gives_smaller_reported_covariance_than_aprbs(project_fmus,
     """20 s each on the virtual test bed (sensor noise only), four free parameters of the
     linearised physical model: the least-squares covariance reported from the designed run is
     smaller (determinant) than from the APRBS run of equal length."""
-    from panto.identification.design.profiles import compare_on_virtual_rig
+    from panto.identification.design.profiles import VirtualRigOptions, compare_on_virtual_rig
 
     free = ("m_c", "k_c", "k_p", "c1")
     model = LinearisedPantograph("physical-linear", free=free, length=1000,
                                  pressure_lag=CONSTRAINTS.pressure_lag)
     design = design_pantograph_experiment(model, CONSTRAINTS,
                                           options=DesignOptions(population=24, generations=30))
-    comparison = compare_on_virtual_rig(design, tmp_path, fmu_path=project_fmus[
-        "Pantograph.fmu"].path, seed=3)
+    comparison = compare_on_virtual_rig(design, tmp_path, options=VirtualRigOptions(
+        fmu_path=project_fmus["Pantograph.fmu"].path, seed=3))
     assert comparison.det_ratio_per_parameter > 1.0
     for run in (comparison.designed, comparison.conventional):
         assert all(np.isfinite(list(run.std.values())))

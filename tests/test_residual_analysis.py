@@ -9,7 +9,9 @@ import pytest
 from scipy import signal as sps
 
 from panto.identification.diagnosis import residual_plots
+from panto.identification.estimation.base import IdentificationData
 from panto.identification.diagnosis.residual_analysis import (
+    ErrorModelOptions,
     analyse_residuals,
     check_cross_correlation,
     check_nonlinearity,
@@ -106,7 +108,8 @@ def test_error_model_recovers_a_known_missing_dynamics_and_its_band():
     b_diff = np.array([0.0, 0.3, 0.2, 0.1])
     eps = sps.lfilter(b_diff, [1.0], u) + 0.05 * np.random.default_rng(11).normal(size=n)
     nominal = lambda f: np.ones((1, len(f)))
-    model = fit_error_model(u, eps, DT, order_b=10, order_a=0, nominal_response=nominal)
+    model = fit_error_model(u, eps, DT, nominal_response=nominal,
+                            options=ErrorModelOptions(order_b=10, order_a=0))
     _, expected = sps.freqz(b_diff, worN=model.frequencies, fs=1 / DT)
     assert np.allclose(model.response[0], expected, atol=0.01)
     assert np.allclose(model.relative_error[0], np.abs(expected), atol=0.01)
@@ -183,8 +186,8 @@ def test_analyse_residuals_is_json_ready_and_plots(tmp_path):
     y_hat = np.c_[_plant(u[:, 0]), _plant(u[:, 1])]
     y = y_hat + np.c_[0.1 * y_hat[:, 0] ** 3, np.zeros(n)] + 0.01 * np.random.default_rng(20).normal(size=(n, 2))
     y[10, 1] = np.nan
-    results = analyse_residuals(u, y, y_hat, DT, input_names=("eta", "p"),
-                                output_names=("F_c", "y_cb"), velocity=np.gradient(y_hat[:, 1]),
+    data = IdentificationData(np.arange(n) * DT, u, y, ("eta", "p"), ("F_c", "y_cb"))
+    results = analyse_residuals(data, y_hat, velocity=np.gradient(y_hat[:, 1]),
                                 conditions={"eta": u[:, 0]})
     text = json.dumps([r.to_dict() for r in results])
     assert '"F_c"' in text and "NaN" not in text
@@ -203,7 +206,7 @@ def test_error_model_is_only_tested_where_the_input_carries_power():
     b, a = sps.butter(6, 5.0, fs=1 / dt)  # input band-limited to about 5 Hz
     u = sps.lfilter(b, a, rng.normal(size=6000))
     residual = 0.3 * np.roll(u, 2) + 0.01 * rng.normal(size=6000)  # a real error inside the band
-    model = fit_error_model(u, residual, dt, order_b=10, order_a=0)
+    model = fit_error_model(u, residual, dt, options=ErrorModelOptions(order_b=10, order_a=0))
     f = model.frequencies
     assert np.all(model.excited[0][f < 3.0]) and not np.any(model.excited[0][f > 15.0])
     assert np.any(model.falsified[0][f < 3.0])  # the in-band error is found

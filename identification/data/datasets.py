@@ -78,13 +78,7 @@ def data_from_dataset(dataset: Any, *, inputs: Mapping[str, Channel],
     output_columns = {name: _signal(dataset, channel, name, source)
                       for name, channel in outputs.items()}
     time = np.asarray(dataset.time, float)
-    keep = np.ones(len(time), bool)
-    if start is not None:
-        keep &= time >= start
-    if stop is not None:
-        keep &= time < stop
-    if keep.sum() < 2:
-        raise IdentificationError(f"{source}: fewer than two samples in [{start}, {stop}) s")
+    keep = _window(time, start, stop, source)
     given = dict(units or {})
     unit_map = {name: given.get(name, dataset.units.get(ch, "") if isinstance(ch, str) else "")
                 for name, ch in {**inputs, **outputs}.items()}
@@ -96,6 +90,19 @@ def data_from_dataset(dataset: Any, *, inputs: Mapping[str, Channel],
         time[keep], np.column_stack([input_columns[n][keep] for n in inputs]),
         np.column_stack([output_columns[n][keep] for n in outputs]), tuple(inputs),
         tuple(outputs), unit_map, source, metadata)
+
+
+def _window(time: np.ndarray, start: float | None, stop: float | None,
+            source: str) -> np.ndarray:
+    """The samples with ``start <= t < stop`` [s] (open ends where None); at least two."""
+    keep = np.ones(len(time), bool)
+    if start is not None:
+        keep &= time >= start
+    if stop is not None:
+        keep &= time < stop
+    if keep.sum() < 2:
+        raise IdentificationError(f"{source}: fewer than two samples in [{start}, {stop}) s")
+    return keep
 
 
 def pantograph_data(dataset: Any, *, rate: float | None = 50.0,
@@ -134,19 +141,8 @@ def pantograph_data(dataset: Any, *, rate: float | None = 50.0,
     source = str(dataset) if isinstance(dataset, (str, Path)) else "dataset"
     dataset = _read(dataset)
     offset = eta_offset if eta_offset is not None else motor_zero_height(dataset, source)
-    if cross_bar not in ("laser", "video"):
-        raise IdentificationError(f"cross_bar {cross_bar!r}: choose 'laser' or 'video'")
-    makers: dict[str, Channel] = {"F_c": "force", "y_cb": _cross_bar_laser
-                                  if cross_bar == "laser" else "video_cross_bar_y",
-                                  "xi": "video_pan_head_y"}
-    unknown = [o for o in outputs if o not in makers]
-    if unknown or not outputs:
-        raise IdentificationError(f"{source}: outputs {list(outputs)}: choose from {list(makers)}")
-    latency = position_latency if position_latency is not None else \
-        _setup_value(dataset, "position_latency", 0.0, source)
-    if not (math.isfinite(latency) and latency >= 0.0):
-        raise IdentificationError(f"{source}: position_latency {latency!r} s: give a finite "
-                                  "latency >= 0 (how late motor_position reports the slider)")
+    makers = _pantograph_outputs(outputs, cross_bar, source)
+    latency = _position_latency(dataset, position_latency, source)
     dataset, filled = _fill_channels(dataset, ("motor_position",), source)
     if latency > 0.0:
         dataset = _advance_channel(dataset, "motor_position", latency)
@@ -161,6 +157,30 @@ def pantograph_data(dataset: Any, *, rate: float | None = 50.0,
 
     return replace(data, metadata={**data.metadata, "filled_channel_samples": filled,
                                    "position_latency": float(latency)})
+
+
+def _pantograph_outputs(outputs: Sequence[str], cross_bar: str,
+                        source: str) -> dict[str, Channel]:
+    """The channel (or function of channels) of each pantograph output; checks the names."""
+    if cross_bar not in ("laser", "video"):
+        raise IdentificationError(f"cross_bar {cross_bar!r}: choose 'laser' or 'video'")
+    makers: dict[str, Channel] = {"F_c": "force", "y_cb": _cross_bar_laser
+                                  if cross_bar == "laser" else "video_cross_bar_y",
+                                  "xi": "video_pan_head_y"}
+    unknown = [o for o in outputs if o not in makers]
+    if unknown or not outputs:
+        raise IdentificationError(f"{source}: outputs {list(outputs)}: choose from {list(makers)}")
+    return makers
+
+
+def _position_latency(dataset: Any, given: float | None, source: str) -> float:
+    """The latency [s] of ``motor_position``: `given`, else the rig set-up fact, else 0."""
+    latency = given if given is not None else \
+        _setup_value(dataset, "position_latency", 0.0, source)
+    if not (math.isfinite(latency) and latency >= 0.0):
+        raise IdentificationError(f"{source}: position_latency {latency!r} s: give a finite "
+                                  "latency >= 0 (how late motor_position reports the slider)")
+    return latency
 
 
 def delay_signal(values: np.ndarray, delay: float, *, half_width: int = 16,

@@ -1,7 +1,8 @@
-"""Load one run as :class:`~panto.identification.estimation.base.IdentificationData` from a file.
+"""Load one run as :class:`~panto.identification.estimation.base.IdentificationData` from a file
+or a table in memory.
 
-:func:`load_identification_data` is what the command line (``panto diagnose``), the demo,
-notebooks and fitting scripts call; :class:`LoadOptions` says how:
+:func:`load_identification_data` is what the command line (``panto identify``, ``panto compare``,
+``panto diagnose``), the demo, notebooks and fitting scripts call; :class:`LoadOptions` says how:
 
 - a rig run with no inputs or outputs named and ``rig_mapping=True``: the rig mapping
   (eta, p) -> (F_c, y_cb) of :func:`~panto.identification.data.datasets.pantograph_data` at
@@ -9,18 +10,22 @@ notebooks and fitting scripts call; :class:`LoadOptions` says how:
 - a dataset of this product (:func:`panto.rig.dataset.read_dataset`: CSV with its side file,
   Parquet, .mat): the named channels through
   :func:`~panto.identification.data.datasets.data_from_dataset`, resampled to ``rate``;
-- any other table (:func:`read_table`: CSV, Parquet or .mat with named numeric columns): the
-  time base is the median step of a ``time``/``t`` column (printed times carry rounding) or
-  ``1 / sample_rate``; ``rate`` decimates with
+- any other table (:func:`read_table`: CSV, Parquet, .mat or HDF5 with named numeric columns,
+  suffixes in any case; or in memory, a :class:`pandas.DataFrame` or a mapping of column name to
+  array): the time base is the median step of a ``time``/``t`` column (printed times carry
+  rounding), else a DataFrame's float index, else ``1 / sample_rate``; ``rate`` decimates with
   :func:`~panto.identification.data.preprocessing.decimate_zero_phase`.
 
-``rows`` then keeps a slice of the samples (two parts of one file can train and validate).
+``rows`` then keeps a slice of the samples (two parts of one file can train and validate), and
+``start``/``stop`` a time window [s]. Constant levels (an input at 5.3 m, a force about 120 N) are
+left in the data: each structure says how it handles them (its result's ``details["levels"]``).
 """
 from __future__ import annotations
 
+import importlib.util
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Mapping
+from typing import Any, Mapping
 
 import numpy as np
 
@@ -46,6 +51,15 @@ class LoadOptions:
         Rig mapping: height [m] of the motor's zero (default: the run's metadata).
     rig_mapping : bool
         Use the pantograph rig mapping when no inputs and outputs are named.
+    start, stop : float or None
+        Keep the samples with ``start <= t < stop`` [s] (time from the first kept row).
+    rig_outputs : tuple of str
+        Rig mapping: the outputs (among ``F_c``, ``y_cb``, ``xi``).
+    cross_bar : {"laser", "video"}
+        Rig mapping: which measurement gives ``y_cb``.
+    position_latency : float or None
+        Rig mapping: how late [s] the drive reports the slider position (default: the run's
+        recorded set-up, else 0).
     """
 
     inputs: Mapping[str, str] = field(default_factory=dict)
@@ -55,51 +69,110 @@ class LoadOptions:
     rows: slice = field(default_factory=lambda: slice(None))
     eta_offset: float | None = None
     rig_mapping: bool = False
+    start: float | None = None
+    stop: float | None = None
+    rig_outputs: tuple[str, ...] = ("F_c", "y_cb")
+    cross_bar: str = "laser"
+    position_latency: float | None = None
+
+#: What :func:`load_identification_data` and :func:`read_table` accept besides a path.
+Table = Any  # pandas.DataFrame or Mapping[str, array-like]
 
 
-def read_table(path: str | Path) -> dict[str, np.ndarray]:
-    """Named columns of a plain CSV, Parquet or .mat file (1-D numeric variables, equal length)."""
-    path = Path(path)
-    if path.suffix == ".mat":
-        import scipy.io
+def read_table(source: str | Path | Table) -> dict[str, np.ndarray]:
+    """Named numeric columns of a plain table, all of one length.
 
-        raw = scipy.io.loadmat(path)
-        columns = {k: np.asarray(v, float).ravel() for k, v in raw.items()
-                   if not k.startswith("__") and isinstance(v, np.ndarray) and v.dtype.kind in "fiu"
-                   and v.size > 1 and min(v.shape) == 1}
+    Parameters
+    ----------
+    source : str, pathlib.Path, pandas.DataFrame or mapping of str to array
+        A CSV, Parquet, .mat or HDF5 (``.h5``, ``.hdf5``: needs PyTables) file, suffix in any
+        case; or a table in memory. A DataFrame without a ``time``/``t`` column whose index is
+        of floats gives that index as the column ``time`` [s].
+    """
+    if not isinstance(source, (str, Path)):
+        columns = _memory_columns(source)
+        where = "table"
     else:
-        import pandas as pd
-
-        frame = pd.read_parquet(path) if path.suffix == ".parquet" else pd.read_csv(path)
-        frame = frame.loc[:, [c for c in frame.columns if not str(c).startswith("Unnamed")]]
-        columns = {str(c): frame[c].to_numpy(float) for c in frame.columns}
+        columns, where = _file_columns(Path(source)), str(source)
     if not columns:
-        raise ValueError(f"{path}: no numeric columns")
+        raise ValueError(f"{where}: no numeric columns")
     length = max(len(v) for v in columns.values())
     return {k: v for k, v in columns.items() if len(v) == length}
 
 
-def load_identification_data(path: str | Path,
-                             options: LoadOptions | None = None) -> IdentificationData:
-    """Identification data of one run (file or run folder) as `options` say (module notes).
+def _file_columns(path: Path) -> dict[str, np.ndarray]:
+    from panto.fmu_src.dataformat import TABLE_SUFFIXES, data_suffix
 
-    Default options: the rig mapping is off, so inputs and outputs must be named.
+    suffix = data_suffix(path, "table", TABLE_SUFFIXES)
+    if not path.is_file():
+        raise ValueError(f"{path}: no such file")
+    if suffix == ".mat":
+        import scipy.io
+
+        raw = scipy.io.loadmat(path)
+        return {k: np.asarray(v, float).ravel() for k, v in raw.items()
+                if not k.startswith("__") and isinstance(v, np.ndarray) and v.dtype.kind in "fiu"
+                and v.size > 1 and min(v.shape) == 1}
+    import pandas as pd
+
+    if suffix in (".h5", ".hdf5"):
+        if importlib.util.find_spec("tables") is None:  # pandas reads HDF5 through PyTables
+            raise ValueError(f"{path}: HDF5 needs PyTables: pip install tables")
+        frame = pd.read_hdf(path)
+    else:
+        frame = pd.read_parquet(path) if suffix == ".parquet" else pd.read_csv(path)
+    return _memory_columns(frame)
+
+
+def _memory_columns(table: Table) -> dict[str, np.ndarray]:
+    """Numeric columns of a DataFrame (a float index as ``time``) or of a mapping."""
+    import pandas as pd
+
+    if not isinstance(table, pd.DataFrame):
+        if not isinstance(table, Mapping):
+            raise ValueError(f"a table is a path, a pandas.DataFrame or a mapping of column to "
+                             f"array, not {type(table).__name__}")
+        columns = {str(k): np.asarray(v) for k, v in table.items()}
+        return {k: v.astype(float).ravel() for k, v in columns.items()
+                if v.dtype.kind in "fiu" and v.size > 1 and v.squeeze().ndim == 1}
+    frame = table.loc[:, [c for c in table.columns if not str(c).startswith("Unnamed")]]
+    columns = {str(c): frame[c].to_numpy(float) for c in frame.columns
+               if pd.api.types.is_numeric_dtype(frame[c])}
+    if "time" not in columns and "t" not in columns and frame.index.dtype.kind == "f":
+        columns = {"time": frame.index.to_numpy(float), **columns}
+    return columns
+
+
+def load_identification_data(source: str | Path | Table,
+                             options: LoadOptions | None = None) -> IdentificationData:
+    """Identification data of one run as `options` say (module notes).
+
+    Parameters
+    ----------
+    source : str, pathlib.Path, pandas.DataFrame or mapping of str to array
+        A file, a run folder, or a table in memory (:func:`read_table`).
+    options : LoadOptions, optional
+        Default: the rig mapping is off, so inputs and outputs must be named.
 
     Raises
     ------
     ValueError
         Inputs or outputs not named (and no rig mapping), a missing column, or a table without
-        a time base; the message names the file.
+        a time base; the message names the file (or "table") and the columns it has.
     """
+    options = options or LoadOptions()
+    if not isinstance(source, (str, Path)):
+        return _window(_table_data("table", read_table(source), options), options)
     from panto.identification.data.datasets import data_from_dataset, pantograph_data
 
-    path, options = str(path), options or LoadOptions()
-    inputs, outputs = dict(options.inputs), dict(options.outputs)
-    if not inputs and not outputs and options.rig_mapping:
-        data = pantograph_data(path, rate=options.rate or 50.0, eta_offset=options.eta_offset)
+    path, inputs, outputs = str(source), dict(options.inputs), dict(options.outputs)
+    if not inputs and not outputs and options.rig_mapping and _is_run(path):
+        data = pantograph_data(path, rate=options.rate or 50.0, eta_offset=options.eta_offset,
+                               start=options.start, stop=options.stop,
+                               cross_bar=options.cross_bar,
+                               position_latency=options.position_latency,
+                               outputs=options.rig_outputs)
         return select_rows(data, options.rows)
-    if not inputs or not outputs:
-        raise ValueError("--inputs and --outputs name the columns (NAME=CHANNEL) for this data")
     try:
         from panto.rig.dataset import read_dataset
 
@@ -107,19 +180,55 @@ def load_identification_data(path: str | Path,
     except Exception:  # not a dataset of this product: a plain table
         dataset = None
     if dataset is not None:
-        return select_rows(data_from_dataset(dataset, inputs=inputs, outputs=outputs,
-                                             rate=options.rate, source=path), options.rows)
-    return _table_data(path, read_table(path), inputs, outputs, options)
+        _check_named(path, options, dataset.names)
+        data = data_from_dataset(dataset, inputs=inputs, outputs=outputs, rate=options.rate,
+                                 source=path)
+        return _window(select_rows(data, options.rows), options)
+    return _window(_table_data(path, read_table(path), options), options)
 
 
-def _table_data(path: str, table: Mapping[str, np.ndarray], inputs: Mapping[str, str],
-                outputs: Mapping[str, str], options: LoadOptions) -> IdentificationData:
+def _is_run(path: str) -> bool:
+    """Whether `path` can be a recorded run (a folder, Parquet, .mat, or a CSV with its side
+    file): only then does the rig mapping apply; a plain CSV needs its columns named."""
+    from panto.fmu_src.dataformat import metadata_path_for
+
+    candidate = Path(path)
+    if candidate.is_dir():
+        return True
+    suffix = candidate.suffix.lower()
+    return suffix in (".parquet", ".mat") or (suffix == ".csv"
+                                              and metadata_path_for(candidate).is_file())
+
+
+def _check_named(where: str, options: LoadOptions, columns: Any) -> None:
+    """Inputs and outputs must be named when the rig mapping does not apply."""
+    if not options.inputs or not options.outputs:
+        raise ValueError(f"{where}: --inputs and --outputs name the columns (NAME=CHANNEL) for "
+                         f"this data; its columns are {sorted(columns)}")
+
+
+def _window(data: IdentificationData, options: LoadOptions) -> IdentificationData:
+    """The samples inside ``[start, stop)`` [s], if a window is set."""
+    if options.start is None and options.stop is None:
+        return data
+    start = -np.inf if options.start is None else options.start
+    kept = data.segment(start, np.inf if options.stop is None else options.stop)
+    if len(kept) < 2:
+        raise ValueError(f"{data.source or 'table'}: fewer than two samples in "
+                         f"[{options.start}, {options.stop}) s")
+    return kept
+
+
+def _table_data(where: str, table: Mapping[str, np.ndarray],
+                options: LoadOptions) -> IdentificationData:
     """A plain table's columns on its time base, rows selected, decimated."""
     from panto.identification.data.preprocessing import decimate_zero_phase
 
+    inputs, outputs = dict(options.inputs), dict(options.outputs)
+    _check_named(where, options, table)
     missing = [c for c in list(inputs.values()) + list(outputs.values()) if c not in table]
     if missing:
-        raise ValueError(f"{path}: no column(s) {missing}; columns are {sorted(table)}")
+        raise ValueError(f"{where}: no column(s) {missing}; columns are {sorted(table)}")
     length = len(next(iter(table.values())))
     time_column = next((table[c] for c in ("time", "t") if c in table), None)
     if options.sample_rate:
@@ -127,7 +236,7 @@ def _table_data(path: str, table: Mapping[str, np.ndarray], inputs: Mapping[str,
     elif time_column is not None:  # the median step (printed times carry rounding)
         time_column = np.arange(length) * float(np.median(np.diff(time_column)))
     else:
-        raise ValueError(f"{path}: no time column; give --sample-rate HZ")
+        raise ValueError(f"{where}: no time column; give --sample-rate HZ")
     u = np.column_stack([table[c] for c in inputs.values()])[options.rows]
     y = np.column_stack([table[c] for c in outputs.values()])[options.rows]
     t = time_column[options.rows]
@@ -135,7 +244,7 @@ def _table_data(path: str, table: Mapping[str, np.ndarray], inputs: Mapping[str,
         factor = int(round(1.0 / ((t[1] - t[0]) * options.rate)))
         if factor > 1:
             t, u, y = t[::factor], decimate_zero_phase(u, factor), decimate_zero_phase(y, factor)
-    return IdentificationData(t - t[0], u, y, tuple(inputs), tuple(outputs), source=path)
+    return IdentificationData(t - t[0], u, y, tuple(inputs), tuple(outputs), source=where)
 
 
 def select_rows(data: IdentificationData, rows: slice) -> IdentificationData:

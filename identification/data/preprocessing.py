@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -235,6 +235,30 @@ def resample_dataset(dataset: Dataset, rate: float = 50.0, *, stopband: float = 
         gets the new rate and ``extra["preprocessing"]`` (a list of steps) records the step.
     """
     source_rate = float(dataset.metadata.sample_rate)
+    step = _resample_step(source_rate, rate, stopband)
+    _check_uniform(dataset.time, source_rate)
+    names = list(dataset.names) if channels is None else list(channels)
+    unknown = [n for n in names if n not in dataset.channels]
+    if unknown:
+        raise PreprocessingError(f"resample: channel(s) {unknown} not in the dataset; channels "
+                                 f"are {list(dataset.names)}")
+    design = design_lowpass(source_rate, stopband=stopband, passband=passband)
+    out, gap_samples = _decimated_channels(dataset, names, design, step)
+    record = {"step": "resample", "from_rate_hz": source_rate, "to_rate_hz": float(rate),
+              "keep": f"every {step}th sample from the first", "filter": design.describe(),
+              "unfiltered_channels": [n for n in names if n in DISCRETE_CHANNELS
+                                      or n.endswith("_valid")],
+              "nan_samples_from_gaps": gap_samples}
+    extra = dict(dataset.metadata.extra)
+    extra["preprocessing"] = [*extra.get("preprocessing", []), record]
+    metadata = replace(dataset.metadata, sample_rate=float(rate), extra=extra)
+    return Dataset(dataset.time[::step], out, {n: dataset.units[n] for n in names}, metadata,
+                   dataset.warnings)
+
+
+def _resample_step(source_rate: float, rate: float, stopband: float) -> int:
+    """The decimation factor ``source_rate / rate`` [samples]; checks it is whole and that
+    `stopband` [Hz] lies below the target Nyquist frequency."""
     ratio = source_rate / rate
     step = int(round(ratio))
     if step < 1 or abs(ratio - step) > 1e-9 * ratio:
@@ -244,13 +268,13 @@ def resample_dataset(dataset: Dataset, rate: float = 50.0, *, stopband: float = 
     if stopband >= 0.5 * rate:
         raise PreprocessingError(f"resample: stopband {stopband} Hz must lie below the target "
                                  f"Nyquist frequency {0.5 * rate} Hz (else it aliases)")
-    _check_uniform(dataset.time, source_rate)
-    names = list(dataset.names) if channels is None else list(channels)
-    unknown = [n for n in names if n not in dataset.channels]
-    if unknown:
-        raise PreprocessingError(f"resample: channel(s) {unknown} not in the dataset; channels "
-                                 f"are {list(dataset.names)}")
-    design = design_lowpass(source_rate, stopband=stopband, passband=passband)
+    return step
+
+
+def _decimated_channels(dataset: Dataset, names: Sequence[str], design: LowpassDesign,
+                        step: int) -> tuple[dict[str, np.ndarray], dict[str, int]]:
+    """Every `step`-th sample of each channel, low-passed unless discrete; per channel with gaps
+    the NaN output samples whose filter support touched a gap."""
     out: dict[str, np.ndarray] = {}
     gap_samples: dict[str, int] = {}
     for name in names:
@@ -263,16 +287,7 @@ def resample_dataset(dataset: Dataset, rate: float = 50.0, *, stopband: float = 
         out[name] = filtered[::step]
         if touched.any():
             gap_samples[name] = int(np.isnan(out[name]).sum())
-    record = {"step": "resample", "from_rate_hz": source_rate, "to_rate_hz": float(rate),
-              "keep": f"every {step}th sample from the first", "filter": design.describe(),
-              "unfiltered_channels": [n for n in names if n in DISCRETE_CHANNELS
-                                      or n.endswith("_valid")],
-              "nan_samples_from_gaps": gap_samples}
-    extra = dict(dataset.metadata.extra)
-    extra["preprocessing"] = [*extra.get("preprocessing", []), record]
-    metadata = replace(dataset.metadata, sample_rate=float(rate), extra=extra)
-    return Dataset(dataset.time[::step], out, {n: dataset.units[n] for n in names}, metadata,
-                   dataset.warnings)
+    return out, gap_samples
 
 
 def _check_uniform(time: np.ndarray, sample_rate: float) -> None:
@@ -356,6 +371,30 @@ class AliasingCheck:
                                                         self.band_difference, self.relevant)]}
 
 
+def _band_edges(max_frequency: float, band_width: float) -> np.ndarray:
+    """Band edges [Hz] of `band_width` from 0 up to `max_frequency` (a last, narrower band)."""
+    edges = np.arange(0.0, max_frequency + 1e-9, band_width)
+    if edges[-1] < max_frequency - 1e-9:  # a last, narrower band up to the lower Nyquist
+        edges = np.append(edges, max_frequency)
+    if edges.size < 2:
+        raise PreprocessingError(f"aliasing check: band_width {band_width} Hz exceeds the lower "
+                                 f"Nyquist frequency {max_frequency} Hz")
+    return edges
+
+
+def _spectra(values: np.ndarray, rate: float, segment_duration: float,
+             max_frequency: float) -> tuple[np.ndarray, np.ndarray, Any]:
+    """Welch PSD [unit^2/Hz] up to `max_frequency` [Hz] and the spectrogram of one run."""
+    from scipy import signal
+
+    per_segment = min(values.size, int(round(segment_duration * rate)))
+    f, psd = signal.welch(values, fs=rate, nperseg=per_segment, detrend="constant")
+    keep = f <= max_frequency
+    spectrogram = signal.spectrogram(values, fs=rate, nperseg=per_segment // 2,
+                                     detrend="constant")
+    return f[keep], psd[keep], spectrogram
+
+
 def _channel_values(dataset: Dataset, channel: str, which: str) -> np.ndarray:
     if channel not in dataset.channels:
         raise PreprocessingError(f"aliasing check: {which} run has no channel {channel!r}; "
@@ -400,29 +439,19 @@ def check_aliasing(first: Dataset, second: Dataset, channel: str = "force", *,
     -------
     AliasingCheck
     """
-    from scipy import signal
-
     rates = (float(first.metadata.sample_rate), float(second.metadata.sample_rate))
     if rates[0] == rates[1]:
         raise PreprocessingError(f"aliasing check: both runs are at {rates[0]} Hz; it needs two "
                                  "different (mutually prime) rates")
     max_frequency = 0.5 * min(rates)
-    edges = np.arange(0.0, max_frequency + 1e-9, band_width)
-    if edges[-1] < max_frequency - 1e-9:  # a last, narrower band up to the lower Nyquist
-        edges = np.append(edges, max_frequency)
-    if edges.size < 2:
-        raise PreprocessingError(f"aliasing check: band_width {band_width} Hz exceeds the lower "
-                                 f"Nyquist frequency {max_frequency} Hz")
+    edges = _band_edges(max_frequency, band_width)
     frequencies, spectra, spectrograms = [], [], []
     for dataset, rate, which in zip((first, second), rates, ("first", "second")):
         values = _channel_values(dataset, channel, which)
-        per_segment = min(values.size, int(round(segment_duration * rate)))
-        f, psd = signal.welch(values, fs=rate, nperseg=per_segment, detrend="constant")
-        keep = f <= max_frequency
-        frequencies.append(f[keep])
-        spectra.append(psd[keep])
-        spectrograms.append(signal.spectrogram(values, fs=rate, nperseg=per_segment // 2,
-                                               detrend="constant"))
+        f, psd, spectrogram = _spectra(values, rate, segment_duration, max_frequency)
+        frequencies.append(f)
+        spectra.append(psd)
+        spectrograms.append(spectrogram)
     powers = np.array([[np.trapezoid(p[(f >= a) & (f <= b)], f[(f >= a) & (f <= b)])
                         for a, b in zip(edges[:-1], edges[1:])]
                        for f, p in zip(frequencies, spectra)])

@@ -309,10 +309,25 @@ def regularising_prior(n_theta: int, noise_variance: float | np.ndarray) -> np.n
     return 1e-9 / float(np.min(noise_variance)) * np.eye(n_theta)
 
 
+@dataclass(frozen=True)
+class OfflineOptions:
+    """What the offline design maximises and the GA that searches for it."""
+
+    criterion: str = "D"
+    """Criterion of the Fisher information: ``A`` (tr M^-1), ``D`` (log det M), ``E``
+    (lambda_min)."""
+    noise_variance: float | np.ndarray = 1.0
+    """Output noise variance :math:`\\sigma^2` per output [output unit^2]."""
+    genetic: GeneticOptions = GeneticOptions()
+    """The GA over the whole experiment."""
+
+    def __post_init__(self) -> None:
+        if self.criterion not in CRITERIA:
+            raise ValueError(f"criterion must be one of {CRITERIA}, got {self.criterion!r}")
+
+
 def design_offline(model: SensitivityModel, theta: Sequence[float], start_inputs: np.ndarray,
-                   constraints: InputConstraints, *, criterion: str = "D",
-                   noise_variance: float | np.ndarray = 1.0,
-                   options: GeneticOptions = GeneticOptions(),
+                   constraints: InputConstraints, *, options: OfflineOptions = OfflineOptions(),
                    progress: Progress | None = None) -> OfflineDesign:
     """Offline DoE (thesis section 5.4, steps 1-4): the whole input optimised by a GA.
 
@@ -324,15 +339,13 @@ def design_offline(model: SensitivityModel, theta: Sequence[float], start_inputs
     start_inputs : ndarray, shape (N,) or (N, n_inputs)
         Start of the search (the thesis' two-sine input); repaired first if infeasible.
     constraints : InputConstraints
-    criterion : {"A", "D", "E"}
-    noise_variance : float or ndarray
-        :math:`\\sigma^2` per output.
-    options : GeneticOptions
+    options : OfflineOptions
+        Criterion, noise variance per output, GA settings.
     progress : callable, optional
         Receives a line about every tenth of the generations.
     """
-    if criterion not in CRITERIA:
-        raise ValueError(f"criterion must be one of {CRITERIA}, got {criterion!r}")
+    criterion, noise_variance = options.criterion, options.noise_variance
+    genetic = options.genetic
     began = time.perf_counter()
     theta = np.asarray(theta, float)
     start_inputs = constraints.repair(constraints.increments(as_input_matrix(start_inputs,
@@ -343,15 +356,15 @@ def design_offline(model: SensitivityModel, theta: Sequence[float], start_inputs
     problem = DesignProblem(model, theta, constraints, shape, criterion, noise_variance,
                             np.zeros((0, shape[1])), initial, regularisation)
     repair = SequenceRepair(constraints, shape, None)
-    every = max(1, options.generations // 10)
+    every = max(1, genetic.generations // 10)
 
     def report(generation: int, best: float) -> None:
         if progress is not None and (generation % every == 0 or generation == 1):
-            progress(f"offline DoE: generation {generation}/{options.generations}, "
+            progress(f"offline DoE: generation {generation}/{genetic.generations}, "
                      f"best cost {best:.6g}")
 
     best, history = run_genetic(problem, constraints.increments(start_inputs).reshape(1, -1),
-                                options, repair, rate, report)
+                                genetic, repair, rate, report)
     inputs = constraints.repair(best.reshape(shape))
     fisher = inputs_fisher_information(model, theta, inputs, noise_variance)
     start_fisher = inputs_fisher_information(model, theta, start_inputs, noise_variance)
@@ -361,7 +374,7 @@ def design_offline(model: SensitivityModel, theta: Sequence[float], start_inputs
         start_fisher, cramer_rao_covariance(start_fisher),
         float(criterion_value(start_fisher, criterion)), history, problem.n_evaluations,
         time.perf_counter() - began,
-        f"GA: {options.generations} generations of {options.population}")
+        f"GA: {genetic.generations} generations of {genetic.population}")
 
 
 def inputs_fisher_information(model: SensitivityModel, theta: np.ndarray, inputs: np.ndarray,

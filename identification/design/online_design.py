@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Protocol
 
 import numpy as np
@@ -59,18 +59,26 @@ class SimulatedPlant:
 
 @dataclass(frozen=True)
 class OnlineOptions:
-    """Receding-horizon settings: `horizon` future inputs optimised per sample by a small GA.
+    """What the online design maximises and its receding-horizon settings: `horizon` future
+    inputs optimised per sample by a small GA."""
 
-    ``initial_covariance`` is :math:`p_0` of the RLS start :math:`P_0 = p_0 I`.
-    """
-
+    criterion: str = "D"
+    """Criterion of the Fisher information, one of ``A``, ``D``, ``E``."""
+    noise_variance: float | np.ndarray = 1.0
+    """Output noise variance :math:`\\sigma^2` per output [output unit^2]."""
     horizon: int = 20
+    """Future inputs optimised per sample [samples]."""
     genetic: GeneticOptions = field(
         default_factory=lambda: GeneticOptions(population=20, generations=12))
+    """The GA run per sample (its seed is advanced by the sample index)."""
     initial_covariance: float = 1e6
+    """:math:`p_0` of the RLS start :math:`P_0 = p_0 I`."""
     forgetting: float = 1.0
+    """RLS forgetting factor (1: none)."""
 
     def __post_init__(self) -> None:
+        if self.criterion not in CRITERIA:
+            raise ValueError(f"criterion must be one of {CRITERIA}, got {self.criterion!r}")
         if self.horizon < 1:
             raise ValueError(f"horizon must be at least 1, got {self.horizon}")
 
@@ -123,7 +131,6 @@ class OnlineDesign:
 
 def design_online(model: SensitivityModel, plant: Plant, theta_initial: Sequence[float],
                   start_inputs: np.ndarray, constraints: InputConstraints, *,
-                  criterion: str = "D", noise_variance: float | np.ndarray = 1.0,
                   options: OnlineOptions = OnlineOptions(),
                   progress: Progress | None = None) -> OnlineDesign:
     """Online DoE (thesis section 5.4): RLS estimate and receding-horizon design per sample.
@@ -145,58 +152,101 @@ def design_online(model: SensitivityModel, plant: Plant, theta_initial: Sequence
         Prior guess, start of the RLS.
     start_inputs : ndarray, shape (N,) or (N, n_inputs)
         Length of the experiment, and the GA's seed.
-    constraints, criterion, noise_variance
-        As for :func:`design_offline`.
+    constraints : InputConstraints
+        As for :func:`~panto.identification.design.input_design.design_offline`.
     options : OnlineOptions
+        Criterion, noise variance, horizon, GA and RLS settings.
     progress : callable, optional
         Receives a line about every tenth of the samples.
     """
-    if criterion not in CRITERIA:
-        raise ValueError(f"criterion must be one of {CRITERIA}, got {criterion!r}")
     began = time.perf_counter()
     start_inputs = constraints.repair(constraints.increments(as_input_matrix(start_inputs,
                                                                              constraints)))
-    n_samples, n_inputs = start_inputs.shape
-    start_steps = constraints.increments(start_inputs)
-    _, _, rate, initial = constraints.arrays()
-    rls = RecursiveLeastSquares.start(theta_initial, options.initial_covariance, options.forgetting)
-    design_theta = rls.theta.copy()
-    regularisation = regularising_prior(design_theta.size, noise_variance)
-    inputs = np.zeros((n_samples, n_inputs))
-    outputs, history, step_times = [], np.zeros((n_samples, design_theta.size)), np.zeros(n_samples)
-    planned = start_steps.copy()
-    n_evaluations, every = 0, max(1, n_samples // 10)
+    run = _OnlineRun.start(model, constraints, options, start_inputs, theta_initial)
+    n_samples = len(start_inputs)
+    every = max(1, n_samples // 10)
     for k in range(n_samples):
         tick = time.perf_counter()
-        outputs.append(np.atleast_1d(plant(inputs[:k])))
-        measured = np.array(outputs)
-        if k > 0:
-            rls.update(model.regressor(inputs[:k, 0], measured[:, 0], k), measured[k, 0])
-        if model.is_stable(rls.theta):
-            design_theta = rls.theta.copy()
-        horizon = min(options.horizon, n_samples - k)
-        previous = inputs[k - 1] if k > 0 else initial
-        seeds = np.stack([planned[k:k + horizon], start_steps[k:k + horizon]]).reshape(2, -1)
-        problem = DesignProblem(model, design_theta, constraints, (horizon, n_inputs), criterion,
-                                 noise_variance, inputs[:k], previous, regularisation)
-        repair = SequenceRepair(constraints, (horizon, n_inputs), previous)
-        genetic = GeneticOptions(options.genetic.population, options.genetic.generations,
-                                 options.genetic.spread, options.genetic.seed + k)
-        best, _ = run_genetic(problem, seeds, genetic, repair, rate)
-        chosen = constraints.repair(best.reshape(horizon, n_inputs), previous)
-        inputs[k] = chosen[0]
-        planned[k:k + horizon] = constraints.increments(chosen, previous)
-        n_evaluations += problem.n_evaluations
-        history[k] = rls.theta
-        step_times[k] = time.perf_counter() - tick
+        run.measure(plant, k)
+        run.plan(k)
+        run.step_times[k] = time.perf_counter() - tick
         if progress is not None and ((k + 1) % every == 0 or k + 1 == n_samples):
-            progress(f"online DoE: sample {k + 1}/{n_samples}, theta {np.round(rls.theta, 4)}, "
-                     f"{1e3 * step_times[k]:.1f} ms")
-    fisher = inputs_fisher_information(model, rls.theta, inputs, noise_variance)
-    return OnlineDesign(
-        inputs, constraints.increments(inputs), start_inputs, np.array(outputs), rls.theta.copy(),
-        history, rls.covariance.copy(), criterion, noise_variance, fisher,
-        cramer_rao_covariance(fisher), float(criterion_value(fisher, criterion)), step_times,
-        n_evaluations, time.perf_counter() - began,
-        f"RLS + receding horizon {options.horizon}, GA {options.genetic.generations} generations "
-        f"of {options.genetic.population} per sample")
+            progress(f"online DoE: sample {k + 1}/{n_samples}, theta {np.round(run.rls.theta, 4)}, "
+                     f"{1e3 * run.step_times[k]:.1f} ms")
+    return run.result(start_inputs, time.perf_counter() - began)
+
+
+@dataclass
+class _OnlineRun:
+    """The state of one online design: the RLS, the inputs applied, the plan and the counters."""
+
+    model: SensitivityModel
+    constraints: InputConstraints
+    options: OnlineOptions
+    rls: RecursiveLeastSquares
+    design_theta: np.ndarray
+    regularisation: np.ndarray
+    start_steps: np.ndarray
+    planned: np.ndarray
+    inputs: np.ndarray
+    history: np.ndarray
+    step_times: np.ndarray
+    outputs: list = field(default_factory=list)
+    n_evaluations: int = 0
+
+    @classmethod
+    def start(cls, model: SensitivityModel, constraints: InputConstraints, options: OnlineOptions,
+              start_inputs: np.ndarray, theta_initial: Sequence[float]) -> _OnlineRun:
+        """Before the first sample: the RLS at the prior guess, the plan = the start input."""
+        n_samples, n_inputs = start_inputs.shape
+        start_steps = constraints.increments(start_inputs)
+        rls = RecursiveLeastSquares.start(theta_initial, options.initial_covariance,
+                                          options.forgetting)
+        design_theta = rls.theta.copy()
+        return cls(model, constraints, options, rls, design_theta,
+                   regularising_prior(design_theta.size, options.noise_variance), start_steps,
+                   start_steps.copy(), np.zeros((n_samples, n_inputs)),
+                   np.zeros((n_samples, design_theta.size)), np.zeros(n_samples))
+
+    def measure(self, plant: Plant, k: int) -> None:
+        """Measure y(k) after u(0..k-1), update the RLS, keep the estimate if it is stable."""
+        self.outputs.append(np.atleast_1d(plant(self.inputs[:k])))
+        measured = np.array(self.outputs)
+        if k > 0:
+            self.rls.update(self.model.regressor(self.inputs[:k, 0], measured[:, 0], k),
+                            measured[k, 0])
+        if self.model.is_stable(self.rls.theta):
+            self.design_theta = self.rls.theta.copy()
+        self.history[k] = self.rls.theta
+
+    def plan(self, k: int) -> None:
+        """Optimise u(k..k+H-1) by the GA and apply u(k)."""
+        constraints, options = self.constraints, self.options
+        n_inputs = self.inputs.shape[1]
+        horizon = min(options.horizon, len(self.inputs) - k)
+        previous = self.inputs[k - 1] if k > 0 else constraints.arrays()[3]
+        seeds = np.stack([self.planned[k:k + horizon],
+                          self.start_steps[k:k + horizon]]).reshape(2, -1)
+        problem = DesignProblem(self.model, self.design_theta, constraints, (horizon, n_inputs),
+                                options.criterion, options.noise_variance, self.inputs[:k],
+                                previous, self.regularisation)
+        repair = SequenceRepair(constraints, (horizon, n_inputs), previous)
+        genetic = replace(options.genetic, seed=options.genetic.seed + k)
+        best, _ = run_genetic(problem, seeds, genetic, repair, constraints.arrays()[2])
+        chosen = constraints.repair(best.reshape(horizon, n_inputs), previous)
+        self.inputs[k] = chosen[0]
+        self.planned[k:k + horizon] = constraints.increments(chosen, previous)
+        self.n_evaluations += problem.n_evaluations
+
+    def result(self, start_inputs: np.ndarray, wall_time: float) -> OnlineDesign:
+        """The design after the last sample, its Fisher information at the final estimate."""
+        options, theta = self.options, self.rls.theta.copy()
+        fisher = inputs_fisher_information(self.model, theta, self.inputs, options.noise_variance)
+        return OnlineDesign(
+            self.inputs, self.constraints.increments(self.inputs), start_inputs,
+            np.array(self.outputs), theta, self.history, self.rls.covariance.copy(),
+            options.criterion, options.noise_variance, fisher, cramer_rao_covariance(fisher),
+            float(criterion_value(fisher, options.criterion)), self.step_times,
+            self.n_evaluations, wall_time,
+            f"RLS + receding horizon {options.horizon}, GA {options.genetic.generations} "
+            f"generations of {options.genetic.population} per sample")

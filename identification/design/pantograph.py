@@ -357,14 +357,20 @@ def design_pantograph_experiment(model: LinearisedPantograph,
     motor, demand = problem.inputs(np.asarray(result.X, float))
     if conventional is None:
         conventional = conventional_inputs(n, constraints)
-    return _design_result(model, constraints, criterion, variance, (motor, demand), conventional,
-                          np.asarray(history), problem.n_evaluations, time.perf_counter() - began,
+    return _design_result(problem, (motor, demand), conventional, np.asarray(history),
+                          time.perf_counter() - began,
                           f"GA: {options.generations} generations of {options.population}, "
                           f"{problem.n_var} levels")
 
 
-def _design_result(model, constraints, criterion, variance, designed, conventional, history,
-                   n_evaluations, wall_time, message) -> PantographDesign:
+def _design_result(problem: LevelProblem, designed: tuple[np.ndarray, np.ndarray],
+                   conventional: tuple[np.ndarray, np.ndarray], history: np.ndarray,
+                   wall_time: float, message: str) -> PantographDesign:
+    """The design and the conventional input, each with its Fisher information, Cramer-Rao
+    covariance, criterion value and simulated outputs, for `problem`'s model and constraints."""
+    model, constraints = problem.model, problem.constraints
+    criterion, variance = problem.criterion, problem.noise_variance
+    n_evaluations = problem.n_evaluations
     evaluations = []
     for motor, demand in (designed, conventional):
         u = model_inputs(motor, demand, constraints)

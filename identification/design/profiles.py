@@ -247,9 +247,24 @@ def _rounded(values: Mapping[str, float], digits: int = 2) -> dict[str, float]:
             for k, v in values.items()}
 
 
-def compare_on_virtual_rig(design: PantographDesign, folder: str | Path, *, fmu_path=None,
-                           imperfections=None, seed: int = 0,
-                           position_latency: float | None = 0.005, start_factor: float = 1.1,
+@dataclass(frozen=True)
+class VirtualRigOptions:
+    """How :func:`compare_on_virtual_rig` runs the virtual test bed and fits its runs."""
+
+    fmu_path: str | Path | None = None
+    """The Pantograph FMU (default: the project's)."""
+    imperfections: RigImperfections | None = None
+    """The bed's imperfections (default :func:`sensor_noise_only`)."""
+    seed: int = 0
+    """Seed of the bed's random imperfections (noise)."""
+    position_latency: float | None = 0.005
+    """How late [s] the drive reports the slider; the fits advance ``motor_position`` by it."""
+    start_factor: float = 1.1
+    """The fits start from the true values times this factor."""
+
+
+def compare_on_virtual_rig(design: PantographDesign, folder: str | Path, *,
+                           options: VirtualRigOptions = VirtualRigOptions(),
                            progress: Callable[[str], None] | None = None) -> VirtualComparison:
     """Run the designed input and the APRBS profile of equal length on the virtual test bed and
     identify the design's free parameters from each: the design's promise is that its run gives
@@ -259,9 +274,10 @@ def compare_on_virtual_rig(design: PantographDesign, folder: str | Path, *, fmu_
     linearisation is the design's model), with :func:`sensor_noise_only` unless
     `imperfections` is given. Both runs are fitted with the design's structure
     (:meth:`LinearisedPantograph.structure_for`) from the design's parameter values, at 50 Hz,
-    the motor position advanced by `position_latency` (the drive's report latency), starting
-    from the true values times `start_factor`.
+    the motor position advanced by ``options.position_latency`` (the drive's report latency),
+    starting from the true values times ``options.start_factor``.
     """
+    fmu_path, imperfections = options.fmu_path, options.imperfections
     if design.structure != "physical-linear":
         raise ValueError(f"compare_on_virtual_rig needs a 'physical-linear' design (the plant is "
                          f"the pantograph FMU, whose parameters are the truth), got "
@@ -278,18 +294,18 @@ def compare_on_virtual_rig(design: PantographDesign, folder: str | Path, *, fmu_
     structure = LinearisedPantograph.structure_for(design.structure)
     plant = {k: v for k, v in design.parameters.items() if k in _fmu_parameter_names()}
     truth = dict(design.parameters)
-    initial = truth | {n: start_factor * truth[n] for n in design.parameter_names}
+    initial = truth | {n: options.start_factor * truth[n] for n in design.parameter_names}
     runs = {}
     for name, rig_profile in profiles.items():
         if progress:
             progress(f"virtual test bed: running the {name} input ({duration:g} s)")
         run_virtual_profile(rig_profile, fmu_path=fmu_path, folder=folder / name,
                             imperfections=imperfections or sensor_noise_only(),
-                            parameters=plant, seed=seed)
+                            parameters=plant, seed=options.seed)
         if progress:
             progress(f"identifying {list(design.parameter_names)} from the {name} run")
         runs[name] = identify_run(name, folder / name, structure, design.parameter_names,
-                                  initial, truth, position_latency=position_latency)
+                                  initial, truth, position_latency=options.position_latency)
     return VirtualComparison(design.structure, design.parameter_names, duration,
                              runs["designed"], runs["conventional"],
                              float(design.summary()["det_ratio_per_parameter"]))

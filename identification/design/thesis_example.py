@@ -18,7 +18,7 @@ from __future__ import annotations
 import csv
 import json
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -45,6 +45,7 @@ from panto.identification.design.input_design import (
     GeneticOptions,
     InputConstraints,
     OfflineDesign,
+    OfflineOptions,
     design_offline,
 )
 from panto.identification.design.online_design import (
@@ -202,13 +203,14 @@ def run_thesis_example(*, end_time: float = END_TIME, criterion: str = "D",
     theta_initial = discretise_oscillator(*INITIAL_PHYSICAL)
     constraints = InputConstraints.symmetric(AMPLITUDE_LIMIT, RATE_LIMIT)
     sine = two_sine_input(n_samples, SAMPLE_PERIOD)
-    offline = design_offline(model, theta_initial, sine, constraints, criterion=criterion,
-                             noise_variance=NOISE_VARIANCE, options=offline_options,
+    offline = design_offline(model, theta_initial, sine, constraints,
+                             options=OfflineOptions(criterion, NOISE_VARIANCE, offline_options),
                              progress=progress)
     plant = SimulatedPlant(model, theta_true, float(np.sqrt(NOISE_VARIANCE)),
                            np.random.default_rng(seed + 1))
-    online = design_online(model, plant, theta_initial, sine, constraints, criterion=criterion,
-                           noise_variance=NOISE_VARIANCE, options=online_options,
+    online = design_online(model, plant, theta_initial, sine, constraints,
+                           options=replace(online_options, criterion=criterion,
+                                           noise_variance=NOISE_VARIANCE),
                            progress=progress)
     rng = np.random.default_rng(seed)
     evaluations = {

@@ -410,11 +410,24 @@ def _project_out(matrix: np.ndarray | None, x: np.ndarray) -> np.ndarray:
     return x if matrix is None or matrix.shape[1] == 0 else x - matrix @ (matrix.T @ x)
 
 
+@dataclass(frozen=True)
+class RankingOptions:
+    """How far :func:`rank_effects` selects and when a step is significant."""
+
+    max_steps: int = 3
+    """Forward-selection steps recorded."""
+    z: float = 2.58
+    """Two-sided normal quantile of the per-test level; Bonferroni-corrected over the tests."""
+    min_err: float = 0.01
+    """Smallest error-reduction ratio (share of the target's energy, 0..1) of a significant step."""
+    max_lag: int = 100
+    """Lags [samples] in ``P = sum rho_w(k) rho_r(k)``."""
+
+
 def rank_effects(target: np.ndarray, regressors: Mapping[str, Mapping[str, Regressor]], *,
                  base: np.ndarray | None = None,
                  sensitivity: Callable[[np.ndarray], np.ndarray] | None = None,
-                 max_steps: int = 3, z: float = 2.58, min_err: float = 0.01,
-                 max_lag: int = 100) -> EffectRanking:
+                 options: RankingOptions = RankingOptions()) -> EffectRanking:
     """Rank candidate effects by the share of `target` their signature explains (FROLS/ERR).
 
     Parameters
@@ -429,13 +442,9 @@ def rank_effects(target: np.ndarray, regressors: Mapping[str, Mapping[str, Regre
     sensitivity : callable, optional
         ``S(phi) -> phi_out``: how an additive term reaches the output (e.g. the nominal model's
         filter from its input); applied to every regressor (not to `base`).
-    max_steps : int
-        Forward-selection steps recorded.
-    z, min_err : float
-        Significance: ``|corr| > z_B sqrt(P / N)`` (``z_B`` Bonferroni-corrected from the two-sided
-        level of `z`) and ``ERR >= min_err``.
-    max_lag : int
-        Lags in ``P = sum rho_w(k) rho_r(k)``.
+    options : RankingOptions
+        Steps recorded; significance ``|corr| > z_B sqrt(P / N)`` (``z_B`` Bonferroni-corrected
+        from the two-sided level of ``z``) and ``ERR >= min_err``; lags in ``P``.
     """
     r = np.asarray(target, float).ravel()
     n = len(r)
@@ -446,32 +455,8 @@ def rank_effects(target: np.ndarray, regressors: Mapping[str, Mapping[str, Regre
     energy0 = _dot(r, r)
     if energy0 <= 0:
         raise IdentificationError("target is explained entirely by the base columns")
-    columns = {}
-    for effect, variants in regressors.items():
-        for label, (x, setting) in variants.items():
-            x = np.asarray(x, float).ravel()
-            x = sensitivity(x) if sensitivity else x
-            if len(x) != n:
-                raise IdentificationError(f"{effect} regressor {label!r}: {len(x)} samples, "
-                                          f"target has {n}")
-            columns[(effect, label)] = (_project_out(q_base, x), dict(setting), _dot(x, x))
-    alpha = 2 * stats.norm.sf(z)
-    steps, chosen, raw = [], [], []
-    first: list[EffectScore] = []
-    for step in range(max_steps):
-        scores = _score_all(columns, chosen, r, energy0, alpha, max_lag)
-        if step == 0:
-            first = sorted(scores.values(), key=lambda s: -s.err)
-        candidates = [s for s in scores.values() if s.effect not in {c.effect for c in steps}]
-        if not candidates:
-            break
-        best = max(candidates, key=lambda s: s.err)
-        best = _with_significance(best, min_err)
-        w = _orthogonal(columns[(best.effect, best.variant)][0], chosen)
-        r = r - w * _dot(w, r) / _dot(w, w)
-        chosen.append(w / math.sqrt(_dot(w, w)))
-        raw.append(columns[(best.effect, best.variant)][0])
-        steps.append(best)
+    columns = _columns(regressors, sensitivity, q_base, n)
+    steps, first, raw = _forward_selection(columns, r, energy0, options)
     steps = _with_coefficients(steps, raw, np.asarray(target, float).ravel(), q_base)
     kept = [i for i, s in enumerate(steps) if s.effect in _leading(steps)]
     remaining = _project_out(q_base, np.asarray(target, float).ravel())
@@ -481,6 +466,48 @@ def rank_effects(target: np.ndarray, regressors: Mapping[str, Mapping[str, Regre
         remaining = remaining - basis @ coefficients
     return EffectRanking(tuple(steps), tuple(first), math.sqrt(energy0 / n),
                          float(np.sqrt(np.mean(remaining ** 2))), n)
+
+
+def _columns(regressors: Mapping[str, Mapping[str, Regressor]],
+             sensitivity: Callable[[np.ndarray], np.ndarray] | None, q_base: np.ndarray | None,
+             n: int) -> dict[tuple[str, str], tuple[np.ndarray, dict, float]]:
+    """Per (effect, variant): the regressor through `sensitivity`, the base projected out, its
+    setting and its squared norm before the projection."""
+    columns = {}
+    for effect, variants in regressors.items():
+        for label, (x, setting) in variants.items():
+            x = np.asarray(x, float).ravel()
+            x = sensitivity(x) if sensitivity else x
+            if len(x) != n:
+                raise IdentificationError(f"{effect} regressor {label!r}: {len(x)} samples, "
+                                          f"target has {n}")
+            columns[(effect, label)] = (_project_out(q_base, x), dict(setting), _dot(x, x))
+    return columns
+
+
+def _forward_selection(columns: Mapping[tuple[str, str], tuple[np.ndarray, dict, float]],
+                       r: np.ndarray, energy0: float, options: RankingOptions
+                       ) -> tuple[list[EffectScore], list[EffectScore], list[np.ndarray]]:
+    """FROLS: the best effect per step on what the steps before leave; returns the steps, the
+    first step's scores of every effect (best first) and the steps' projected regressors."""
+    alpha = 2 * stats.norm.sf(options.z)
+    steps, chosen, raw = [], [], []
+    first: list[EffectScore] = []
+    for step in range(options.max_steps):
+        scores = _score_all(columns, chosen, r, energy0, alpha, options.max_lag)
+        if step == 0:
+            first = sorted(scores.values(), key=lambda s: -s.err)
+        candidates = [s for s in scores.values() if s.effect not in {c.effect for c in steps}]
+        if not candidates:
+            break
+        best = max(candidates, key=lambda s: s.err)
+        best = _with_significance(best, options.min_err)
+        w = _orthogonal(columns[(best.effect, best.variant)][0], chosen)
+        r = r - w * _dot(w, r) / _dot(w, w)
+        chosen.append(w / math.sqrt(_dot(w, w)))
+        raw.append(columns[(best.effect, best.variant)][0])
+        steps.append(best)
+    return steps, first, raw
 
 
 def _leading(steps: Sequence[EffectScore]) -> set[str]:

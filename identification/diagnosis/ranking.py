@@ -70,26 +70,20 @@ def rank_candidates(model: Any, train: IdentificationData, roles: SignalRoles,
     best: dict[str, dict[str, Any]] = {}
     total: dict[str, float] = {}
     per_output = {}
+    context = _Context(model, train, roles, signals, drive)
     for j, output in enumerate(train.output_names):
-        target = eps[:, j]
-        if not np.any(target):
+        if not np.any(eps[:, j]):
             continue
-        base = jac[:, j, :] if jac.shape[2] else None
-        if base is not None:
-            base = base[:, np.linalg.norm(base, axis=0) > 0]
-        sensitivity = _output_filter(model.structure, model.parameters, output, drive)
         if paths:
             regressors = {e: {v: (paths[(e, v)][:, j] if (e, v) in paths else x, setting)
                               for v, (x, setting) in variants.items()}
                           for e, variants in regressors.items()}
-        split = _split_per_input(regressors)
-        try:
-            ranking = rank_effects(target, split, base=base, sensitivity=sensitivity,
-                                   max_steps=3)
-        except IdentificationError:
+        ranked = _rank_output(context, output, eps[:, j], jac[:, j, :] if jac.shape[2] else None,
+                              regressors)
+        if ranked is None:
             continue
-        per_output[output] = ranking.to_dict()
-        for score in ranking.first_step:
+        per_output[output] = ranked.ranking.to_dict()
+        for score in ranked.ranking.first_step:
             if not score.err >= MIN_ERR:
                 continue
             key = score.effect
@@ -97,20 +91,64 @@ def rank_candidates(model: Any, train: IdentificationData, roles: SignalRoles,
             total[key] = total.get(key, 0.0) + float(score.err)
             if key not in best or (score.significant, score.err) > (
                     best[key]["significant"], best[key]["err"]):
-                coefficient = _coefficient(split[key][score.variant][0], target, base,
-                                           sensitivity)
-                setting = _setting(score, output, coefficient, signals, train, roles, drive)
-                through = equivalent_input(model.structure, score.effect)
-                if through:
-                    setting["input_scale"] = float(np.std(train.input(through))) or 1.0
-                best[key] = {
-                    "effect": score.effect, "variant": score.variant, "err": float(score.err),
-                    "significant": bool(score.significant), "output": output,
-                    "setting": setting}
+                best[key] = _candidate(context, ranked, key, score)
     for key, candidate in best.items():
         candidate["err_total"] = total[key]
     top = sorted(best.values(), key=lambda c: (not c["significant"], -c["err_total"]))
     return {"top": top[:max_refits], "per_output": per_output}
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class _Context:
+    """What every output's ranking shares: the current model, the training run, the signal roles,
+    the named signals the regressors are built from, and the input that drives the model."""
+
+    model: Any
+    train: IdentificationData
+    roles: SignalRoles
+    signals: Mapping[str, np.ndarray]
+    drive: str
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class _OutputRanking:
+    """One output's FROLS ranking and what its candidates' start settings are computed from."""
+
+    output: str
+    target: np.ndarray
+    base: np.ndarray | None
+    sensitivity: Any
+    split: dict[str, dict[str, Any]]
+    ranking: Any
+
+
+def _rank_output(context: _Context, output: str, target: np.ndarray, base: np.ndarray | None,
+                 regressors: Mapping[str, Mapping[str, Any]]) -> _OutputRanking | None:
+    """FROLS on one output's residual `target`, the nominal's sensitivities `base` projected
+    out (None when the ranking fails)."""
+    if base is not None:
+        base = base[:, np.linalg.norm(base, axis=0) > 0]
+    model = context.model
+    sensitivity = _output_filter(model.structure, model.parameters, output, context.drive)
+    split = _split_per_input(regressors)
+    try:
+        ranking = rank_effects(target, split, base=base, sensitivity=sensitivity)
+    except IdentificationError:
+        return None
+    return _OutputRanking(output, target, base, sensitivity, split, ranking)
+
+
+def _candidate(context: _Context, ranked: _OutputRanking, key: str, score: Any) -> dict[str, Any]:
+    """A candidate for refitting: its effect, variant, ERR and the augmentation's start setting."""
+    coefficient = _coefficient(ranked.split[key][score.variant][0], ranked.target, ranked.base,
+                               ranked.sensitivity)
+    setting = _setting(score, ranked.output, coefficient, context.signals, context.train,
+                       context.roles, context.drive)
+    through = equivalent_input(context.model.structure, score.effect)
+    if through:
+        setting["input_scale"] = float(np.std(context.train.input(through))) or 1.0
+    return {"effect": score.effect, "variant": score.variant, "err": float(score.err),
+            "significant": bool(score.significant), "output": ranked.output, "setting": setting}
 
 
 #: Smallest error-reduction ratio for a candidate to be refitted at all.

@@ -35,7 +35,7 @@ import numpy as np
 from scipy import signal as sps
 from scipy import stats
 
-from panto.identification.estimation.base import IdentificationError, fit_percent
+from panto.identification.estimation.base import IdentificationData, IdentificationError, fit_percent
 from panto.identification.diagnosis.residual_energy import (BandEnergy, ConditionEnergy,
                                                              SegmentEnergy, Serialisable,
                                                              energy_by_band, energy_by_condition,
@@ -198,19 +198,36 @@ class ErrorModel(Serialisable):
         return jsonable(out)  # type: ignore[return-value]
 
 
+@dataclass(frozen=True)
+class ErrorModelOptions:
+    """Orders, frequency grid and confidence level of the model error model
+    (:func:`fit_error_model`)."""
+
+    order_b: int = 20
+    """FIR length ``nb`` per input [samples]."""
+    order_a: int = 4
+    """Order of ``A(q)`` (0: the FIR form)."""
+    n_frequencies: int = 256
+    """Points of the frequency grid from 0 to the Nyquist frequency."""
+    alpha: float = 0.01
+    """Level of the confidence radius of the response (1 - alpha coverage)."""
+
+
 def fit_error_model(u: np.ndarray, residual: np.ndarray, sample_period: float, *,
-                    order_b: int = 20, order_a: int = 4, n_frequencies: int = 256,
-                    alpha: float = 0.01, input_names: Sequence[str] | None = None,
-                    nominal_response: np.ndarray | Callable[[np.ndarray], np.ndarray] | None = None
-                    ) -> ErrorModel:
+                    input_names: Sequence[str] | None = None,
+                    nominal_response: np.ndarray | Callable[[np.ndarray], np.ndarray] | None = None,
+                    options: ErrorModelOptions = ErrorModelOptions()) -> ErrorModel:
     """Fit the model error model ``A(q) eps(t) = sum_i sum_{k<nb} b_ik u_i(t-k) + e(t)``.
 
     ``order_a = 0`` gives the FIR form; ``order_a > 0`` whitens a coloured free-run residual so that
     the covariance ``sigma^2 (Phi^T Phi)^-1`` is honest. The response and its Jacobian are
     ``G_i = B_i / A``, ``dG_i/db_ik = e^{-jwk} / A``, ``dG_i/da_k = -G_i e^{-jwk} / A``.
     `nominal_response` (``(n_u, n_frequencies)`` complex at :attr:`ErrorModel.frequencies`, or a
-    callable of the frequencies [Hz]) gives ``|G_e / G|``.
+    callable of the frequencies [Hz]) gives ``|G_e / G|``. `sample_period` in [s]; `options`
+    gives ``nb``, ``na``, the frequency grid and the confidence level.
     """
+    order_b, order_a = options.order_b, options.order_a
+    n_frequencies, alpha = options.n_frequencies, options.alpha
     eps = finite_column(residual, "residual")
     u = _matrix(u, len(eps), "inputs")
     names = tuple(input_names or (f"u{i}" for i in range(u.shape[1])))
@@ -414,23 +431,24 @@ class OutputAnalysis(Serialisable):
         return jsonable(out)  # type: ignore[return-value]
 
 
-def analyse_residuals(u: np.ndarray, y: np.ndarray, y_hat: np.ndarray, sample_period: float, *,
-                      input_names: Sequence[str] | None = None,
-                      output_names: Sequence[str] | None = None,
+def analyse_residuals(data: IdentificationData, y_hat: np.ndarray, *,
                       conditions: Mapping[str, np.ndarray] | None = None,
                       velocity: np.ndarray | None = None, max_lag: int = 25,
-                      error_model_orders: tuple[int, int] = (20, 4)) -> list[OutputAnalysis]:
+                      error_model: ErrorModelOptions = ErrorModelOptions()
+                      ) -> list[OutputAnalysis]:
     """Run every test of this module on each output's free-run residual ``y - y_hat``.
 
-    `conditions` maps a variable name (height, pressure, amplitude...) to its samples for
-    :func:`energy_by_condition`; `velocity` adds :func:`energy_by_velocity`. Missing (NaN)
-    measured samples count as zero residual.
+    `data` holds the inputs ``u``, the measured outputs ``y`` and their names; `y_hat` (N,
+    n_outputs) is the model's free run on it. `conditions` maps a variable name (height,
+    pressure, amplitude...) to its samples for :func:`energy_by_condition`; `velocity` adds
+    :func:`energy_by_velocity`; `max_lag` [samples] bounds the correlation tests; `error_model`
+    sets :func:`fit_error_model`. Missing (NaN) measured samples count as zero residual.
     """
-    y = np.asarray(y, float).reshape(len(y), -1)
+    y = np.asarray(data.outputs, float).reshape(len(data), -1)
     y_hat = np.asarray(y_hat, float).reshape(y.shape)
-    u = _matrix(u, len(y), "inputs")
-    inputs = list(input_names or (f"u{i}" for i in range(u.shape[1])))
-    outputs = list(output_names or (f"y{j}" for j in range(y.shape[1])))
+    u = _matrix(data.inputs, len(y), "inputs")
+    sample_period = data.sample_period
+    inputs, outputs = list(data.input_names), list(data.output_names)
     results = []
     for j, name in enumerate(outputs):
         measured = np.where(np.isfinite(y[:, j]), y[:, j], y_hat[:, j])
@@ -446,8 +464,7 @@ def analyse_residuals(u: np.ndarray, y: np.ndarray, y_hat: np.ndarray, sample_pe
             name, float(fit_percent(measured, y_hat[:, j])), float(np.sqrt(np.mean(eps ** 2))),
             float(eps.mean()), float(np.sum(eps ** 2) / spread) if spread > 0 else math.nan,
             check_whiteness(eps, max_lag), crosses,
-            fit_error_model(u, eps, sample_period, order_b=error_model_orders[0],
-                            order_a=error_model_orders[1], input_names=inputs),
+            fit_error_model(u, eps, sample_period, input_names=inputs, options=error_model),
             energy_by_band(measured, eps, sample_period),
             energy_by_segment(measured, eps, sample_period),
             check_nonlinearity(eps, u, y_hat[:, j], input_names=inputs), tuple(found)))

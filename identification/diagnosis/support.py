@@ -147,12 +147,13 @@ def sensitivities(structure: ModelStructure, parameters: Mapping[str, float],
     return np.stack(columns, axis=2)
 
 
-def retuning(structure: ModelStructure, parameters: Mapping[str, float], free: Sequence[str],
-             data: IdentificationData, simulated: np.ndarray,
-             covariance: np.ndarray | None = None, alpha: float = 0.01,
-             start: int = 0) -> dict[str, Any]:
+def retuning(model: Any, data: IdentificationData, simulated: np.ndarray, *,
+             alpha: float = 0.01, start: int = 0) -> dict[str, Any]:
     """What a local retuning of the free parameters on `data` would change, and whether the
     retuned parameters agree with the training estimate.
+
+    `model` holds ``structure``, ``parameters``, ``free`` (the names retuned) and ``covariance``
+    (of the training estimate of ``free``, or None); `simulated` is its free run on `data`.
 
     ``prediction``: the free run plus ``J c``, ``J = d y_hat / d theta`` (:func:`sensitivities`
     on `data`) and ``c`` ONE least-squares retuning for all outputs together (each output's rows
@@ -177,20 +178,12 @@ def retuning(structure: ModelStructure, parameters: Mapping[str, float], free: S
     training fit's estimation error; projected out, none of the tests fired.
     """
     y = np.asarray(simulated, float)
-    jac = sensitivities(structure, parameters, free, data)
+    free = tuple(model.free)
+    jac = sensitivities(model.structure, model.parameters, free, data)
     valid = np.isfinite(data.outputs)
     valid[:max(int(start), 0)] = False
-    error = np.where(valid, data.outputs - y, 0.0)
+    rows, targets, n, n_eff = _normalised_rows(jac, np.where(valid, data.outputs - y, 0.0), valid)
     prediction = y.copy()
-    rows, targets, n, n_eff = [], [], 0, 0.0
-    for j in range(y.shape[1]):
-        ok = valid[:, j]
-        a = jac[ok, j, :]
-        s = float(np.std(error[ok, j])) or 1.0
-        rows.append(a / s)
-        targets.append(error[ok, j] / s)
-        n += int(ok.sum())
-        n_eff += effective_samples(error[ok, j])
     joint = np.vstack(rows)
     used = np.linalg.norm(joint, axis=0) > 0 if joint.size else np.zeros(0, bool)
     if np.any(used):  # one parameter change for all outputs: the model's, not one per output
@@ -198,11 +191,34 @@ def retuning(structure: ModelStructure, parameters: Mapping[str, float], free: S
         prediction = np.where(valid, y + jac[:, :, used] @ c_joint, y)
     out = {"prediction": prediction, "chi2": math.nan, "dof": 0, "threshold": math.nan,
            "consistent": True}
-    cov = None if covariance is None else np.asarray(covariance, float)
+    cov = None if model.covariance is None else np.asarray(model.covariance, float)
     if cov is None or jac.shape[2] != len(free) or cov.shape != (len(free), len(free)) or \
             not np.all(np.isfinite(cov)):
         return out
-    a, b = np.vstack(rows), np.concatenate(targets)
+    return {**out, **_consistency(joint, np.concatenate(targets), cov, (n, n_eff), alpha)}
+
+
+def _normalised_rows(jac: np.ndarray, error: np.ndarray, valid: np.ndarray
+                     ) -> tuple[list[np.ndarray], list[np.ndarray], int, float]:
+    """Per output: the valid sensitivity rows and residuals divided by the residual's standard
+    deviation; the valid samples and their effective number, summed over the outputs."""
+    rows, targets, n, n_eff = [], [], 0, 0.0
+    for j in range(error.shape[1]):
+        ok = valid[:, j]
+        s = float(np.std(error[ok, j])) or 1.0
+        rows.append(jac[ok, j, :] / s)
+        targets.append(error[ok, j] / s)
+        n += int(ok.sum())
+        n_eff += effective_samples(error[ok, j])
+    return rows, targets, n, n_eff
+
+
+def _consistency(a: np.ndarray, b: np.ndarray, cov: np.ndarray, samples: tuple[int, float],
+                 alpha: float) -> dict[str, Any]:
+    """``chi2`` of the joint retuning (parameters scaled by their sensitivity norms) against the
+    two estimates' covariance, the validation one inflated by ``N / N_eff`` (`samples`: ``N``,
+    ``N_eff``)."""
+    n, n_eff = samples
     scale = np.linalg.norm(a, axis=0)
     keep = scale > 0
     a = a[:, keep] / scale[keep]
@@ -214,45 +230,47 @@ def retuning(structure: ModelStructure, parameters: Mapping[str, float], free: S
     w, v = np.linalg.eigh(0.5 * (total + total.T))
     ok = w > max(w.max(), 0.0) * 1e-10
     if not np.any(ok):
-        return out
+        return {}
     chi2 = float(np.sum((v[:, ok].T @ c) ** 2 / w[ok]))
     dof = int(ok.sum())
     threshold = float(stats.chi2.ppf(1 - alpha, dof))
-    return {**out, "chi2": chi2, "dof": dof, "threshold": threshold,
-            "consistent": chi2 <= threshold}
+    return {"chi2": chi2, "dof": dof, "threshold": threshold, "consistent": chi2 <= threshold}
 
 
 # --- judging a refit ------------------------------------------------------------------------
 
-def judge_trial(candidate: Mapping[str, Any], structure: Any, result: IdentificationResult,
-                model: Any, train: IdentificationData, validation: IdentificationData,
-                current: np.ndarray, simulated: np.ndarray, folds: int) -> dict[str, Any]:
-    """The acceptance tests of one refitted candidate (module notes); the Trial's fields."""
-    _, eps0 = residuals(model.structure, model.parameters, train)
-    _, eps1 = residuals(structure, result.parameters, train)
-    valid = np.isfinite(train.outputs)
-    n_eff = [effective_samples(eps1[valid[:, j], j]) for j in range(eps1.shape[1])]
-    delta = 0.0
-    for j in range(eps1.shape[1]):
-        s0 = float(np.mean(eps0[valid[:, j], j] ** 2))
-        s1 = float(np.mean(eps1[valid[:, j], j] ** 2))
-        delta += n_eff[j] * math.log(max(s1, 1e-300) / max(s0, 1e-300))
+@dataclasses.dataclass(frozen=True, eq=False)
+class Refit:
+    """One candidate refitted (:func:`judge_trial`): the augmented structure, the least-squares
+    result on the training run and its free run on the validation run."""
+
+    structure: Any
+    """The augmented structure (``effect_parameters`` names the effect's own parameters)."""
+    result: IdentificationResult
+    """The output-error refit on the training run."""
+    simulated: np.ndarray
+    """Free run on the validation run, shape (N, n_outputs), output units."""
+
+
+def judge_trial(candidate: Mapping[str, Any], refit: Refit, model: Any,
+                train: IdentificationData, validation: IdentificationData, current: np.ndarray,
+                folds: int) -> dict[str, Any]:
+    """The acceptance tests of one refitted candidate (module notes); the Trial's fields.
+
+    `model` is the current model (``structure``, ``parameters``), `current` its free run on the
+    validation run; `folds` blocked folds of the validation run give the improvement's spread."""
+    structure, result = refit.structure, refit.result
+    delta_bic, n_eff = _delta_bic(model, refit, train)
     p = len(structure.effect_parameters)
-    delta_bic = delta + p * math.log(max(sum(n_eff), 2.0))
-    inflation = math.sqrt(valid.sum() / max(sum(n_eff), 1.0))
+    inflation = math.sqrt(np.isfinite(train.outputs).sum() / max(sum(n_eff), 1.0))
     effect = candidate["effect"]
     own = {n: float(result.parameters[n]) for n in structure.effect_parameters}
     std = {n: float(result.std.get(n, math.nan)) * inflation for n in structure.effect_parameters}
-    if effect in NO_MAGNITUDE or not own:
-        significance = math.inf
-    else:
-        name = MAGNITUDE.get(effect, structure.effect_parameters[0])
-        s = std.get(name, math.nan)
-        significance = abs(own[name]) / s if s > 0 else (math.inf if s == 0 else 0.0)
+    significance = _significance(effect, structure, own, std)
     fit_before = _fits(validation, current)
-    fit_after = _fits(validation, simulated)
+    fit_after = _fits(validation, refit.simulated)
     improvement = float(np.mean([fit_after[o] - fit_before[o] for o in fit_before]))
-    per_output = _fold_improvements(validation, current, simulated, folds)
+    per_output = _fold_improvements(validation, current, refit.simulated, folds)
     per_fold = [float(v) for v in np.nanmean(per_output, axis=1)]
     spread = float(np.std(per_fold, ddof=1)) if len(per_fold) > 1 else 0.0
     standard_error = spread / math.sqrt(len(per_fold))
@@ -275,6 +293,32 @@ def judge_trial(candidate: Mapping[str, Any], structure: Any, result: Identifica
             "fold_improvements": tuple(per_fold), "fold_spread": spread,
             "fit_train": dict(result.fit), "fit_validation": fit_after, "accepted": not failed,
             "failed": tuple(failed), "message": result.message}
+
+
+def _delta_bic(model: Any, refit: Refit, train: IdentificationData) -> tuple[float, list[float]]:
+    """``dBIC`` of the refit against the current model on the training residuals, and the refit
+    residual's effective sample size per output."""
+    _, eps0 = residuals(model.structure, model.parameters, train)
+    _, eps1 = residuals(refit.structure, refit.result.parameters, train)
+    valid = np.isfinite(train.outputs)
+    n_eff = [effective_samples(eps1[valid[:, j], j]) for j in range(eps1.shape[1])]
+    delta = 0.0
+    for j in range(eps1.shape[1]):
+        s0 = float(np.mean(eps0[valid[:, j], j] ** 2))
+        s1 = float(np.mean(eps1[valid[:, j], j] ** 2))
+        delta += n_eff[j] * math.log(max(s1, 1e-300) / max(s0, 1e-300))
+    p = len(refit.structure.effect_parameters)
+    return delta + p * math.log(max(sum(n_eff), 2.0)), n_eff
+
+
+def _significance(effect: str, structure: Any, own: Mapping[str, float],
+                  std: Mapping[str, float]) -> float:
+    """``|theta| / sigma_theta`` of the effect's magnitude parameter (inf where it has none)."""
+    if effect in NO_MAGNITUDE or not own:
+        return math.inf
+    name = MAGNITUDE.get(effect, structure.effect_parameters[0])
+    s = std.get(name, math.nan)
+    return abs(own[name]) / s if s > 0 else (math.inf if s == 0 else 0.0)
 
 
 def _fold_improvements(validation: IdentificationData, current: np.ndarray,
@@ -357,40 +401,10 @@ def gap_significance(analysis: Sequence[Any], data: IdentificationData,
             f"{tuning['threshold']:.1f}, {tuning['dof']} degrees of freedom)")
     n_outputs = max(1, len(analysis))
     for a in analysis:
-        found = []
-        crosses = a.cross_correlation
-        for c in crosses:
-            z_b = stats.norm.isf(alpha / (2 * len(c.lags) * len(crosses) * n_outputs))
-            ratio = float(np.max(np.abs(c.correlation)) / (c.bound / 2.58))
-            if ratio > z_b:
-                found.append(f"{a.output_name} residual correlated with input {c.input_name} "
-                             f"(peak {c.peak_value:.2f} at lag {c.peak_lag})")
-        test = a.nonlinearity
-        z_n = stats.norm.isf(alpha / (2 * 41 * len(test.signals) * n_outputs))
-        strength = np.asarray(test.max_correlation) / (np.asarray(test.bounds) / 2.58)
-        for name, value in zip(test.signals, strength):
-            if value > z_n:
-                found.append(f"{a.output_name} residual correlated with {name} (nonlinearity)")
-        model = a.error_model
-        level = math.sqrt(stats.chi2.ppf(1 - 0.01, 2))
-        z_e = math.sqrt(stats.chi2.ppf(1 - alpha / (model.order_b * len(model.input_names)
-                                                    * n_outputs), 2))
-        for i, name in enumerate(model.input_names):
-            ratio = np.abs(model.response[i]) / np.maximum(model.radius[i] / level, 1e-300)
-            excited = model.excited[i] if model.excited is not None else \
-                excited_band(data.input(name), data.sample_period, model.frequencies)
-            ratio = np.where(excited, ratio, 0.0)
-            if np.max(ratio) > z_e:
-                k = int(np.argmax(ratio))
-                found.append(f"{a.output_name}: model error model from {name} leaves its "
-                             f"confidence band (near {model.frequencies[k]:.3g} Hz)")
-        r = np.asarray(a.whiteness.autocorrelation)
-        n = len(data)
-        n_eff = n / (1.0 + 2.0 * float(np.sum(r ** 2)))
-        sd = math.sqrt(max(a.residual_rms ** 2 - a.residual_mean ** 2, 0.0))
-        z_m = stats.norm.isf(alpha / (2 * n_outputs))
-        if sd > 0 and abs(a.residual_mean) > z_m * sd / math.sqrt(n_eff):
-            found.append(f"{a.output_name} residual mean {a.residual_mean:.4g} differs from zero")
+        found = (_correlation_reasons(a, alpha, n_outputs) +
+                 _nonlinearity_reasons(a, alpha, n_outputs) +
+                 _error_model_reasons(a, data, alpha, n_outputs) +
+                 _mean_reasons(a, len(data), alpha, n_outputs))
         found += [f"{a.output_name} residual {term} drifts over the record"
                   for term in (drift or {}).get(a.output_name, ())]
         keep = relevant[a.output_name]
@@ -404,6 +418,58 @@ def gap_significance(analysis: Sequence[Any], data: IdentificationData,
     return {"significant": bool(reasons), "reasons": reasons, "per_output": per_output,
             "parameter_consistency": consistency, "below_relevance": ignored,
             "relevance_fit_points": relevance if costs else None}
+
+
+def _correlation_reasons(a: Any, alpha: float, n_outputs: int) -> list[str]:
+    """The residual's cross-correlation with each input beyond its Bonferroni bound (over lags,
+    inputs and outputs)."""
+    found, crosses = [], a.cross_correlation
+    for c in crosses:
+        z_b = stats.norm.isf(alpha / (2 * len(c.lags) * len(crosses) * n_outputs))
+        ratio = float(np.max(np.abs(c.correlation)) / (c.bound / 2.58))
+        if ratio > z_b:
+            found.append(f"{a.output_name} residual correlated with input {c.input_name} "
+                         f"(peak {c.peak_value:.2f} at lag {c.peak_lag})")
+    return found
+
+
+def _nonlinearity_reasons(a: Any, alpha: float, n_outputs: int) -> list[str]:
+    """The power signals (nonlinearity tests, 41 lags each) the residual is correlated with."""
+    test = a.nonlinearity
+    z_n = stats.norm.isf(alpha / (2 * 41 * len(test.signals) * n_outputs))
+    strength = np.asarray(test.max_correlation) / (np.asarray(test.bounds) / 2.58)
+    return [f"{a.output_name} residual correlated with {name} (nonlinearity)"
+            for name, value in zip(test.signals, strength) if value > z_n]
+
+
+def _error_model_reasons(a: Any, data: IdentificationData, alpha: float,
+                         n_outputs: int) -> list[str]:
+    """The inputs whose model error model leaves its confidence band where the input excites."""
+    found, model = [], a.error_model
+    level = math.sqrt(stats.chi2.ppf(1 - 0.01, 2))
+    z_e = math.sqrt(stats.chi2.ppf(1 - alpha / (model.order_b * len(model.input_names)
+                                                * n_outputs), 2))
+    for i, name in enumerate(model.input_names):
+        ratio = np.abs(model.response[i]) / np.maximum(model.radius[i] / level, 1e-300)
+        excited = model.excited[i] if model.excited is not None else \
+            excited_band(data.input(name), data.sample_period, model.frequencies)
+        ratio = np.where(excited, ratio, 0.0)
+        if np.max(ratio) > z_e:
+            k = int(np.argmax(ratio))
+            found.append(f"{a.output_name}: model error model from {name} leaves its "
+                         f"confidence band (near {model.frequencies[k]:.3g} Hz)")
+    return found
+
+
+def _mean_reasons(a: Any, n: int, alpha: float, n_outputs: int) -> list[str]:
+    """The residual mean against its standard error from the effective sample size."""
+    r = np.asarray(a.whiteness.autocorrelation)
+    n_eff = n / (1.0 + 2.0 * float(np.sum(r ** 2)))
+    sd = math.sqrt(max(a.residual_rms ** 2 - a.residual_mean ** 2, 0.0))
+    z_m = stats.norm.isf(alpha / (2 * n_outputs))
+    if sd > 0 and abs(a.residual_mean) > z_m * sd / math.sqrt(n_eff):
+        return [f"{a.output_name} residual mean {a.residual_mean:.4g} differs from zero"]
+    return []
 
 
 def where_summary(analysis: Sequence[Any], data: IdentificationData) -> dict[str, Any]:
@@ -570,5 +636,5 @@ def settling_time(structure: ModelStructure, parameters: Mapping[str, float],
 
 
 __all__ = ["build_structure", "default_roles", "residuals", "effective_samples", "sensitivities",
-           "retuning", "judge_trial", "gap_significance", "where_summary", "systematic_cost",
+           "retuning", "Refit", "judge_trial", "gap_significance", "where_summary", "systematic_cost",
            "settling_time", "RELEVANCE", "drift_test"]

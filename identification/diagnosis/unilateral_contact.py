@@ -70,6 +70,23 @@ class SwitchedRun:
     switched: bool
 
 
+@dataclass(frozen=True, eq=False)
+class ContactModel:
+    """A linear(ised) model with its contact force, for :func:`simulate_switched` (module notes).
+    Units: those of the model's states and inputs; the force in newtons."""
+
+    a: np.ndarray
+    """``A`` in contact (bilateral), shape (n, n)."""
+    b: np.ndarray
+    """``B`` in contact, shape (n, m)."""
+    c_force: np.ndarray
+    """State row of the contact force ``g = c_F x + d_F u``, shape (n,)."""
+    d_force: np.ndarray
+    """Input row of the contact force, shape (m,); a constant part goes in a constant input."""
+    column: np.ndarray
+    """``b_c`` (:func:`contact_column`): state derivative per newton of contact force, (n,)."""
+
+
 def contact_column(b: np.ndarray, d_force: np.ndarray, wire: int) -> np.ndarray:
     """``b_c = -B[:, wire] / d_F[wire]``: the state derivative per newton of contact force.
 
@@ -83,10 +100,10 @@ def contact_column(b: np.ndarray, d_force: np.ndarray, wire: int) -> np.ndarray:
     return np.asarray(b, float)[:, wire] / stiffness
 
 
-def _modes(a: np.ndarray, b: np.ndarray, c_force: np.ndarray, d_force: np.ndarray,
-           column: np.ndarray) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
+def _modes(model: ContactModel) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
     """``(A, B)`` in contact and in flight (contact element removed)."""
-    return (a, b), (a + np.outer(column, c_force), b + np.outer(column, d_force))
+    a, b, column = model.a, model.b, model.column
+    return (a, b), (a + np.outer(column, model.c_force), b + np.outer(column, model.d_force))
 
 
 def _tables(a: np.ndarray, b: np.ndarray, period: float, substeps: int) -> np.ndarray:
@@ -116,7 +133,11 @@ class _Mode:
     rows_x: np.ndarray    # (M, n): the state part of `rows`
 
 
-def _prepare(a, b, c_force, d_force, u, slope, period, substeps) -> _Mode:
+def _prepare(matrices: tuple[np.ndarray, np.ndarray], model: ContactModel, u: np.ndarray,
+             slope: np.ndarray, period: float, substeps: int) -> _Mode:
+    """One mode's maps for `matrices` ``(A, B)``, inputs `u` and their slopes (per second)."""
+    a, b = matrices
+    c_force, d_force = model.c_force, model.d_force
     n, m = b.shape
     maps = _tables(a, b, period, substeps)[:, :n, :]
     rows = c_force @ maps
@@ -127,20 +148,14 @@ def _prepare(a, b, c_force, d_force, u, slope, period, substeps) -> _Mode:
     return _Mode(maps, rows, drive, offsets, maps[-1, :, :n].copy(), rows[:, :n].copy())
 
 
-def simulate_switched(a: np.ndarray, b: np.ndarray, c_force: np.ndarray, d_force: np.ndarray,
-                      column: np.ndarray, u: np.ndarray, x0: np.ndarray, period: float, *,
+def simulate_switched(model: ContactModel, u: np.ndarray, x0: np.ndarray, period: float, *,
                       hold: str = "foh", substeps: int = SUBSTEPS) -> SwitchedRun:
     """Free run of ``x' = A x + B u + b_c min(g, 0)``, ``g = c_F x + d_F u`` (module notes).
 
     Parameters
     ----------
-    a, b : ndarray
-        The model in contact (bilateral), ``(n, n)`` and ``(n, m)``.
-    c_force, d_force : ndarray
-        The contact force ``g = c_F x + d_F u`` (``(n,)``, ``(m,)``); a constant part goes in a
-        constant input column of `u`.
-    column : ndarray
-        ``b_c`` (:func:`contact_column`).
+    model : ContactModel
+        ``A``, ``B`` in contact, the contact force's rows ``c_F``, ``d_F`` and ``b_c``.
     u : ndarray, shape (N, m)
         Input samples every `period` seconds.
     x0 : ndarray
@@ -155,8 +170,8 @@ def simulate_switched(a: np.ndarray, b: np.ndarray, c_force: np.ndarray, d_force
         raise IdentificationError(f"switched simulation: hold {hold!r}, substeps {substeps}, "
                                   f"{len(u)} samples")
     slope = np.diff(u, axis=0) / period if hold == "foh" else np.zeros((len(u) - 1, u.shape[1]))
-    modes = [_prepare(ai, bi, c_force, d_force, u, slope, period, substeps)
-             for ai, bi in _modes(a, b, c_force, d_force, column)]
+    modes = [_prepare(matrices, model, u, slope, period, substeps) for matrices in _modes(model)]
+    c_force, d_force = model.c_force, model.d_force
     contact = modes[IN_CONTACT]
     with np.errstate(over="ignore", invalid="ignore"):  # a diverging run is refused below
         states = propagate(contact.phi, contact.drive, x0)
@@ -271,9 +286,9 @@ class UnilateralContact(ModelStructure):
         """The switched run on `data`, with the output maps ``(C, D)`` for inputs ``u`` extended
         by a constant column (all outputs ``(y_cb, xi, F_c)``)."""
         a, b, c, d, u, x0, hold = self._linear_form(parameters, data)
-        column = contact_column(b, d[2], 0)
-        run = simulate_switched(a, b, c[2], d[2], column, u, x0, data.sample_period,
-                                hold=hold, substeps=self.substeps)
+        model = ContactModel(a, b, c[2], d[2], contact_column(b, d[2], 0))
+        run = simulate_switched(model, u, x0, data.sample_period, hold=hold,
+                                substeps=self.substeps)
         return run, c, d, u
 
     def simulate(self, parameters, data) -> np.ndarray:
@@ -309,5 +324,5 @@ def _check_stable(a: np.ndarray, name: str, parameters) -> None:
         raise IdentificationError(f"{name}: unstable linear model for {dict(parameters)}")
 
 
-__all__ = ["SwitchedRun", "UnilateralContact", "contact_column", "simulate_switched",
+__all__ = ["SwitchedRun", "ContactModel", "UnilateralContact", "contact_column", "simulate_switched",
            "supports_unilateral", "SUBSTEPS"]

@@ -10,6 +10,7 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "ModelStructure": "base",
     "fit_percent": "base",
     "fit_least_squares": "least_squares",
+    "fit_global": "global_fit",
     "fit_pareto": "genetic",
     "compare_structures": "comparison",
     "write_identification": "reporting",

@@ -199,6 +199,11 @@ class IdentificationResult:
         ``simulator(data) -> ndarray (n, n_outputs)``: the identified model on other data.
     details : mapping
         Anything else worth reporting (Pareto front, poles, matrices, identifiability).
+    estimates : mapping of str to ParameterEstimate
+        Per parameter: value, unit, standard deviation, 95 % interval, verdict (identifiable /
+        weakly / not, at a bound, fixed at prior), correlated group
+        (:class:`panto.identification.estimation.uncertainty.ParameterEstimate`); empty when
+        the estimator gives none.
     """
 
     structure: str
@@ -214,6 +219,7 @@ class IdentificationResult:
     n_evaluations: int
     simulator: Callable[[IdentificationData], np.ndarray] = field(repr=False)
     details: Mapping[str, Any] = field(default_factory=dict)
+    estimates: Mapping[str, Any] = field(default_factory=dict)
 
     @property
     def n_free(self) -> int:

@@ -33,21 +33,32 @@ Jacobian
 
 Uncertainty and identifiability
     :mod:`panto.identification.estimation.uncertainty`: the sandwich covariance from the Jacobian with the
-    residual variance per output, 95 % intervals ``theta +- 1.96 sigma``, and the weak directions
-    of the Fisher information with the parameters they involve.
+    residual variance per output (parameters at a bound left out), 95 % intervals
+    ``theta exp(+-1.96 sigma_z)`` for the log-parameterised and ``theta +- 1.96 sigma`` for the
+    others, none at a bound, the weak directions of the Fisher information with the parameters
+    they involve, and a :class:`ParameterEstimate` per parameter (value, unit, verdict, group).
+
+Fixing what the data cannot pin
+    With ``fix_unidentifiable`` the fit is repeated with the fewest parameters fixed at their
+    prior (``initial`` or the structure's nominal) that remove the not-identifiable directions
+    (:func:`~panto.identification.estimation.uncertainty.parameters_to_fix`), from the previous
+    optimum, until none is left; they are reported as "fixed at prior (not identifiable from
+    this run)" instead of running to a bound.
 """
 from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
 from panto.identification.estimation.base import (IdentificationData, IdentificationError, IdentificationResult,
                                  ModelStructure, fit_percent)
-from panto.identification.estimation.uncertainty import describe_identifiability, uncertainty
+from panto.identification.estimation.uncertainty import (ParameterEstimate, describe_identifiability,
+                                                        parameter_estimates, parameters_to_fix,
+                                                        uncertainty)
 
 Progress = Callable[[str], None]
 #: z-value of the two-sided 95 % normal interval.
@@ -353,7 +364,8 @@ def fit_least_squares(structure: ModelStructure, data: IdentificationData, *,
                       max_evaluations: int = 2000, multistart: int = 0,
                       rng: np.random.Generator | None = None, step: float | None = None,
                       tolerance: float = 1e-6,
-                      identifiability_threshold: float = 0.5) -> IdentificationResult:
+                      identifiability_threshold: float = 0.5,
+                      fix_unidentifiable: bool = False) -> IdentificationResult:
     """Fit `free` parameters of `structure` to `data` by bounded Levenberg-Marquardt (module notes).
 
     Parameters
@@ -385,6 +397,9 @@ def fit_least_squares(structure: ModelStructure, data: IdentificationData, *,
         gradient is that small).
     identifiability_threshold : float
         Relative standard deviation above which a parameter (or direction) is not identifiable.
+    fix_unidentifiable : bool
+        Refit with the not-identifiable parameters fixed at their prior (module notes); they
+        are left out of ``free`` and named in ``details["fixed_at_prior"]``.
 
     Returns
     -------
@@ -392,7 +407,9 @@ def fit_least_squares(structure: ModelStructure, data: IdentificationData, *,
         ``success`` False with the reason in ``message`` when the start point is invalid or the
         budget ran out. ``details``: ``intervals_95``, ``relative_std``, ``identifiability``,
         ``residual_std`` (per output, physical units), ``initial``, ``bounds``, ``cost``,
-        ``at_bounds``, ``runs`` (multistart), ``iterations``.
+        ``at_bounds``, ``runs`` (multistart), ``iterations``; with `fix_unidentifiable`
+        ``fixed_at_prior`` (name -> reason) and ``first_fit``. ``estimates``: a
+        :class:`ParameterEstimate` per requested parameter (fixed ones included).
 
     Raises
     ------
@@ -414,6 +431,9 @@ def fit_least_squares(structure: ModelStructure, data: IdentificationData, *,
     best = min(runs, key=lambda run: run.get("cost", math.inf))
     result = _result(problem, best, runs, lower, upper, executor, identifiability_threshold,
                      options, started)
+    if fix_unidentifiable:
+        result = _fix_unidentifiable(problem, result, bounds, executor, progress,
+                                     identifiability_threshold, options, started)
     if progress:
         progress(f"{structure.name}: {result.message}; fit " +
                  ", ".join(f"{k} {v:.2f} %" for k, v in result.fit.items()))
@@ -463,6 +483,7 @@ def _result(problem: Problem, best: dict, runs: list[dict], lower: np.ndarray, u
     fits = {o: math.nan for o in problem.data.output_names}
     covariance = np.full((len(free), len(free)), np.nan)
     std = nan
+    estimates: dict[str, ParameterEstimate] = {}
     success = best["status"] == "converged"
     message = best["message"]
     if best["status"] != "invalid":
@@ -470,25 +491,76 @@ def _result(problem: Problem, best: dict, runs: list[dict], lower: np.ndarray, u
         counter = _Counter(problem, 10 ** 9, None)
         jac = _jacobian(problem, z, r, options["step"], upper, executor, counter)
         evaluations += counter.count + 1
-        info = uncertainty(problem, z, r, jac, threshold)
+        sides = {n: "lower" if abs(zi - lo) < 1e-6 else "upper"
+                 for n, zi, lo, hi in zip(free, z, lower, upper)
+                 if abs(zi - lo) < 1e-6 or abs(zi - hi) < 1e-6}
+        info = uncertainty(problem, z, r, jac, threshold, np.array([n not in sides for n in free]))
+        estimates = parameter_estimates(problem, z, info, sides, structure_units(structure))
         covariance, std = info["covariance"], dict(zip(free, info["std"].tolist()))
         fits = fits_from_residuals(problem, r)
         details.update(
             cost=0.5 * float(r @ r),
-            intervals_95={n: (parameters[n] - Z95 * s, parameters[n] + Z95 * s)
-                          for n, s in std.items()},
+            intervals_95={n: e.interval_95 for n, e in estimates.items()},
             relative_std=dict(zip(free, info["relative_std"].tolist())),
             identifiability=info["identifiability"], residual_std=info["residual_std"],
-            at_bounds=[n for n, zi, lo, hi in zip(free, z, lower, upper)
-                       if abs(zi - lo) < 1e-6 or abs(zi - hi) < 1e-6])
+            at_bounds=list(sides), at_bound_sides=sides, fisher_z=info["fisher"])
         fits = {o: float(np.atleast_1d(v)[0]) for o, v in fits.items()}
     return IdentificationResult(
         structure=structure.name, method="levenberg-marquardt", parameters=parameters,
         free=tuple(free), std=std, covariance=covariance, fit=fits, success=success,
         message=message, wall_time=time.perf_counter() - started, n_evaluations=evaluations,
         simulator=FittedSimulator(structure, dict(parameters), problem.data.output_names),
-        details=details)
+        details=details, estimates=estimates)
+
+
+def structure_units(structure: ModelStructure) -> dict[str, str]:
+    """Unit per parameter from the structure's optional ``units()`` ({} when it has none)."""
+    units = getattr(structure, "units", None)
+    return dict(units()) if callable(units) else {}
+
+
+def _fix_unidentifiable(problem: Problem, result: IdentificationResult,
+                        bounds: Mapping[str, tuple[float, float]] | None, executor: Any,
+                        progress: Progress | None, threshold: float, options: dict[str, Any],
+                        started: float) -> IdentificationResult:
+    """Refit with the not-identifiable parameters fixed at their prior (module notes)."""
+    first, fixed = result, {}
+    while "fisher_z" in result.details:
+        free = list(result.free)
+        report = result.details["identifiability"]
+        chosen = parameters_to_fix(free, result.details["fisher_z"], threshold,
+                                   list(report["not_identifiable"]))
+        kept = [n for n in free if n not in chosen]
+        if not chosen or not kept:
+            break
+        fixed.update({n: report["not_identifiable"][n] for n in chosen})
+        if progress:
+            progress(f"{problem.structure.name}: fixed at prior (not identifiable from this run): "
+                     f"{', '.join(chosen)}; refitting {len(kept)} parameters")
+        start = {**problem.base, **{n: result.parameters[n] for n in kept}}
+        sub, z0, lower, upper = make_problem(problem.structure, problem.data, kept, start, bounds)
+        runs = _run_all(sub, [z0], lower, upper, options, executor, progress)
+        evaluations = result.n_evaluations
+        result = _result(sub, runs[0], runs, lower, upper, executor, threshold, options, started)
+        result = replace(result, n_evaluations=result.n_evaluations + evaluations)
+    if not fixed:
+        return result
+    units = structure_units(problem.structure)
+    estimates = dict(result.estimates) | {n: ParameterEstimate(
+        n, problem.base[n], units.get(n, "-"), logarithmic=bool(problem.logarithmic[k]),
+        verdict="not identifiable", fixed=True, reason=why)
+        for k, n in enumerate(problem.free) for why in [fixed.get(n)] if why is not None}
+    first_fit = {"parameters": {n: first.parameters[n] for n in problem.free},
+                 "fit": dict(first.fit), "message": first.message,
+                 "identifiability": first.details.get("identifiability")}
+    details = {**result.details, "fixed_at_prior": fixed, "first_fit": first_fit,
+               "initial": first.details["initial"], "bounds": first.details["bounds"]}
+    return replace(result, estimates={n: estimates[n] for n in problem.free if n in estimates},
+                   details=details, wall_time=time.perf_counter() - started,
+                   message=f"{result.message}; fixed at prior (not identifiable from this run): "
+                           f"{', '.join(fixed)}")
 
 
 __all__ = ["fit_least_squares", "make_problem", "uncertainty", "describe_identifiability",
+           "structure_units", "ParameterEstimate",
            "FittedSimulator", "Problem", "random_starts", "fit_percent"]

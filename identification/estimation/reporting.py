@@ -7,8 +7,11 @@
   parameter file (every model parameter, the identified ones with their provenance) that
   ``panto linearise --parameters`` and the FMU build accept; for other structures the plain values;
 - ``result.json``: structure, method, fit per output (training and validation), parameters with
-  standard deviation, 95 % interval and nominal value, identifiability, wall time, evaluations,
-  success and message;
+  unit, standard deviation, 95 % interval, verdict (identifiable / weakly / not, at a bound, fixed
+  at prior), correlated group and nominal value, identifiability (with the rule and its
+  thresholds), wall time, evaluations, success and message;
+- ``summary.md``: the same as a table a person reads (:func:`parameter_table`), with the fits and
+  what was fixed or hit a bound, and why;
 - ``fit.png``: measured against simulated (free run) per output, training and validation.
 """
 from __future__ import annotations
@@ -38,9 +41,11 @@ def write_identification(result: IdentificationResult, folder: str | Path, *,
     folder.mkdir(parents=True, exist_ok=True)
     paths = {"parameters": write_parameters(result, folder / "parameters.json",
                                             parameter_set=parameter_set),
-             "result": folder / "result.json", "plot": folder / "fit.png"}
+             "result": folder / "result.json", "plot": folder / "fit.png",
+             "summary": folder / "summary.md"}
     summary = result_summary(result, data=data, validation=validation, nominal=nominal)
     paths["result"].write_text(json.dumps(summary, indent=2, default=_plain) + "\n")
+    paths["summary"].write_text(markdown_summary(result, summary))
     plot_fit(result, data, paths["plot"], validation=validation)
     return paths
 
@@ -60,6 +65,10 @@ def write_parameters(result: IdentificationResult, path: str | Path, *,
             entry = content["parameters"][name]
             entry["provenance"] = (f"identified ({result.structure}, {result.method}); std "
                                    f"{result.std.get(name, math.nan):.4g} {entry['unit']}")
+        for name, estimate in result.estimates.items():
+            if name in content["parameters"] and (estimate.fixed or estimate.at_bound):
+                content["parameters"][name]["provenance"] = (
+                    f"{estimate.status} ({result.structure}, {result.method}): {estimate.reason}")
         content["identification"] = {"structure": result.structure, "fit": dict(result.fit)}
     else:
         content = {"model": result.structure,
@@ -78,6 +87,9 @@ def result_summary(result: IdentificationResult, *, data: IdentificationData,
         row: dict[str, Any] = {"value": value, "free": name in result.free}
         if name in result.free:
             row.update(std=result.std.get(name), interval_95=intervals.get(name))
+        if name in result.estimates:
+            row.update({k: v for k, v in result.estimates[name].to_dict().items()
+                        if k != "name"})
         if nominal and name in nominal:
             row["nominal"] = nominal[name]
         rows[name] = row
@@ -88,12 +100,59 @@ def result_summary(result: IdentificationResult, *, data: IdentificationData,
         "training": {"source": data.source, "samples": len(data), "fit_percent": dict(result.fit)},
         "parameters": rows,
         "identifiability": result.details.get("identifiability"),
+        "fixed_at_prior": result.details.get("fixed_at_prior", {}),
+        "first_fit": _first_fit(result),
         "residual_std": result.details.get("residual_std"),
     }
     if validation is not None:
         summary["validation"] = {"source": validation.source, "samples": len(validation),
                                  "fit_percent": _validation_fit(result, validation)}
     return summary
+
+
+def parameter_table(result: IdentificationResult) -> str:
+    """The fitted parameters as a markdown table: value, unit, +- (1 sigma), 95 % interval,
+    verdict and status (estimated, at a bound, fixed at prior), correlated group."""
+    lines = ["| parameter | value | unit | ± (1 σ) | 95 % interval | verdict | status | group |",
+             "|---|---|---|---|---|---|---|---|"]
+    for name, e in result.estimates.items():
+        low, high = e.interval_95
+        interval = f"[{low:.4g}, {high:.4g}]" if math.isfinite(low) and math.isfinite(high) \
+            else "—"
+        std = f"{e.std:.3g}" if math.isfinite(e.std) else "—"
+        lines.append(f"| {name} | {e.value:.5g} | {e.unit} | {std} | {interval} | {e.verdict} | "
+                     f"{e.status} | {', '.join(e.group) or '—'} |")
+    return "\n".join(lines) + "\n"
+
+
+def markdown_summary(result: IdentificationResult, summary: Mapping[str, Any]) -> str:
+    """``summary.md``: fits, the parameter table, why parameters were fixed or sit at a bound,
+    and the rule of the verdicts."""
+    fits = ", ".join(f"{k} {v:.2f} %" for k, v in result.fit.items())
+    parts = [f"# {result.structure} ({result.method})", "", f"{result.message}", "",
+             f"Fit on training: {fits}"]
+    validation = (summary.get("validation") or {}).get("fit_percent") or {}
+    if validation and "error" not in validation:
+        parts.append("Fit on validation: " + ", ".join(f"{k} {v:.2f} %"
+                                                        for k, v in validation.items()))
+    parts += ["", parameter_table(result) if result.estimates else "(no per-parameter estimates)"]
+    notes = [f"- {n}: {e.status if e.fixed or e.at_bound else e.verdict}: {e.reason}"
+             for n, e in result.estimates.items()
+             if e.verdict != "identifiable" and e.reason]
+    if notes:
+        parts += ["Why:", ""] + notes + [""]
+    rule = (result.details.get("identifiability") or {}).get("rule")
+    if rule:
+        parts += [f"Verdicts: {rule}.", ""]
+    return "\n".join(parts)
+
+
+def _first_fit(result: IdentificationResult) -> dict[str, Any] | None:
+    first = result.details.get("first_fit")
+    if not first:
+        return None
+    return {"parameters": first["parameters"], "fit_percent": first["fit"],
+            "message": first["message"]}
 
 
 def _validation_fit(result: IdentificationResult, validation: IdentificationData) -> dict:
@@ -105,6 +164,8 @@ def _validation_fit(result: IdentificationResult, validation: IdentificationData
 
 
 def _plain(value: Any) -> Any:
+    if hasattr(value, "to_dict"):
+        return value.to_dict()
     if isinstance(value, np.ndarray):
         return value.tolist()
     if isinstance(value, (np.floating, np.integer)):

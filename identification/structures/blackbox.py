@@ -44,6 +44,9 @@ from panto.identification.estimation.base import (IdentificationData, Identifica
 Progress = Callable[[str], None]
 #: Default fitted outputs when present (the thesis' two objectives).
 DEFAULT_OUTPUTS = ("F_c", "y_cb")
+#: How the model handles constant levels (said in every result's message).
+LEVELS = ("removed the means of every input and output before fitting (u_ref, y_ref; the output "
+          "offset estimated on top); they are added back in the simulator")
 #: Largest pole radius a reflected (or clipped) subspace pole gets.
 _MAX_RADIUS = 0.995
 
@@ -393,40 +396,61 @@ def fit_state_space(data: IdentificationData, order: int, *, refine: bool = True
     valid = np.isfinite(y)
     norms = np.array([np.linalg.norm(y[valid[:, j], j] - y[valid[:, j], j].mean())
                       for j in range(y.shape[1])])
-    a, c, singular = moesp(u, y, order, horizon)
-    blocks, c_block = block_form(a, c)
     y_zero = np.where(valid, y, 0.0)
-    model = linear_part(blocks, c_block, u, y_zero, valid, norms)
+    a, c, singular = moesp(u, y, order, horizon)
+    model = linear_part(*block_form(a, c), u, y_zero, valid, norms)
     fit_subspace = fit_percent(data.outputs, _physical(model, scaling, u))
     if progress:
         progress(f"state space order {order}: subspace fit " + _describe(data, fit_subspace))
     evaluations, message = 1, "subspace estimate (PO-MOESP) with least-squares B, D, offset"
     covariance = np.full((len(model.theta),) * 2, np.nan)
     if refine:
-        candidate, solution = refine_output_error(model, u, y_zero, valid, norms,
-                                                  max_evaluations=max_evaluations)
-        evaluations += solution.nfev + solution.njev * (len(blocks) + 1)
-        before = 0.5 * float(np.sum(_residuals(model, u, y_zero, valid, norms) ** 2))
-        if solution.cost < before:
-            model = candidate
-            covariance = _covariance(solution.jac, solution.fun)
-        message = f"refined by output error: {solution.message}" if solution.cost < before \
-            else "refinement did not lower the cost; the subspace estimate is kept"
+        model, covariance, extra, message = _refined(model, covariance, u, y_zero, valid, norms,
+                                                     max_evaluations)
+        evaluations += extra
     fits = np.atleast_1d(fit_percent(data.outputs, _physical(model, scaling, u)))
     if progress:
         progress(f"state space order {order}: {message}; fit " + _describe(data, fits))
+    details = {"fit_subspace": dict(zip(data.output_names, np.atleast_1d(fit_subspace).tolist())),
+               "singular_values": singular[:2 * order + 2].tolist(), "horizon": horizon}
+    return _state_space_result(data, model, scaling, covariance, fits, details,
+                               (refine, message, int(evaluations), time.perf_counter() - started))
+
+
+def _refined(model: BlockModel, covariance: np.ndarray, u: np.ndarray, y_zero: np.ndarray,
+             valid: np.ndarray, norms: np.ndarray, max_evaluations: int
+             ) -> tuple[BlockModel, np.ndarray, int, str]:
+    """The output-error refinement when it lowers the cost (else `model`, `covariance` kept),
+    the evaluations it took (Jacobians counted per column) and what happened."""
+    candidate, solution = refine_output_error(model, u, y_zero, valid, norms,
+                                              max_evaluations=max_evaluations)
+    evaluations = solution.nfev + solution.njev * (len(model.parts()[0]) + 1)
+    before = 0.5 * float(np.sum(_residuals(model, u, y_zero, valid, norms) ** 2))
+    if solution.cost < before:
+        return (candidate, _covariance(solution.jac, solution.fun), evaluations,
+                f"refined by output error: {solution.message}")
+    return (model, covariance, evaluations,
+            "refinement did not lower the cost; the subspace estimate is kept")
+
+
+def _state_space_result(data: IdentificationData, model: BlockModel, scaling: Scaling,
+                        covariance: np.ndarray, fits: np.ndarray, details: dict[str, Any],
+                        run: tuple[bool, str, int, float]) -> IdentificationResult:
+    """The result record; `run` is (refined, message, evaluations, wall time [s])."""
+    refine, message, evaluations, wall_time = run
+    order = model.order
     names = parameter_names(order, data.input_names, data.output_names)
     std = np.sqrt(np.clip(np.diag(covariance), 0, None))
     return IdentificationResult(
         structure=f"blackbox-{order}", method="po-moesp+oe" if refine else "po-moesp",
         parameters=dict(zip(names, model.theta.tolist())), free=names,
         std=dict(zip(names, std.tolist())), covariance=covariance,
-        fit=dict(zip(data.output_names, fits.tolist())), success=True, message=message,
-        wall_time=time.perf_counter() - started, n_evaluations=int(evaluations),
+        fit=dict(zip(data.output_names, fits.tolist())), success=True,
+        message=f"{message}; {LEVELS}",
+        wall_time=wall_time, n_evaluations=evaluations,
         simulator=StateSpaceSimulator(model, scaling, data.input_names, data.output_names),
-        details={**physical_matrices(model, scaling, data.sample_period),
-                 "fit_subspace": dict(zip(data.output_names, np.atleast_1d(fit_subspace).tolist())),
-                 "singular_values": singular[:2 * order + 2].tolist(), "horizon": horizon,
+        details={**physical_matrices(model, scaling, data.sample_period), **details,
+                 "levels": {"centred": True, "message": LEVELS},
                  "order": order, "input_names": data.input_names,
                  "output_names": data.output_names})
 
@@ -494,7 +518,13 @@ def identify_state_space(data: IdentificationData, *, order: int, executor: Any 
                          progress: Progress | None = None, outputs: Sequence[str] | None = None,
                          refine: bool = True, horizon: int | None = None,
                          max_evaluations: int = 100, **options: Any) -> IdentificationResult:
-    """Identifier entry: fit the outputs (default those of ``("F_c", "y_cb")`` in `data`)."""
+    """Identifier entry: fit the outputs (default those of ``("F_c", "y_cb")`` in `data`).
+
+    The command line's generic options at their neutral values (no fixed parameters, ``method
+    "lm"``, no multistart) mean nothing here and are accepted; any other option is an error.
+    """
+    neutral = {"fixed": {}, "method": "lm", "multistart": 0}
+    options = {k: v for k, v in options.items() if not (k in neutral and v == neutral[k])}
     if options:
         raise IdentificationError(f"blackbox-{order}: unknown option(s) {sorted(options)}")
     del executor  # one fit takes seconds; nothing to spread

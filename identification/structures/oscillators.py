@@ -124,6 +124,13 @@ class OscillatorStructure(ModelStructure):
             b["v_eps"] = (1e-5, 0.1)
         return b
 
+    def units(self) -> dict[str, str]:
+        """Unit of every parameter (masses kg, springs N/m, dampers N s/m, ``p_gain`` N/bar, ...)."""
+        kinds = {"m": "kg", "k": "N/m", "c": "N s/m", "F": "N"}
+        fixed = {"k_E": "N/m", "p_gain": "N/bar", "F_0": "N", "y_0": "m", "y_cb_offset": "m",
+                 "v_eps": "m/s"}
+        return {n: fixed[n] if n in fixed else kinds[n[0]] for n in self.parameter_names}
+
     def default_free(self) -> tuple[str, ...]:
         """Masses, springs, dampers, ``p_gain``, ``F_0`` (+ ``y_cb_offset`` when ``y_cb`` is an
         output, + the friction forces).
@@ -193,6 +200,26 @@ class OscillatorStructure(ModelStructure):
         c[2, n - 1] = k_e
         d = np.array([[0.0, 0.0, y_0 + v["y_cb_offset"]], [0.0, 0.0, y_0], [-k_e, 0.0, k_e * y_0]])
         return a, b, c, d
+
+    def linear_system(self, parameters: Mapping[str, float], data: IdentificationData
+                      ) -> tuple[np.ndarray, ...]:
+        """Continuous ``(A, B, C, D)`` from `data`'s inputs to `data`'s outputs (their units).
+
+        The model without friction is linear; the constant input carrying ``F_0``, ``y_0`` and
+        ``y_cb_offset`` only shifts the outputs and is left out (an affine offset does not change
+        the frequency response). Raises NotImplementedError with friction (not linear).
+        """
+        if self.friction:
+            raise NotImplementedError(f"{self.name}: Coulomb friction is not linear")
+        a, b, c, d = self.matrices(parameters)
+        inputs = [self._position(INPUT_NAMES, n, "input") for n in data.input_names]
+        rows = [self._position(OUTPUT_NAMES, n, "output") for n in data.output_names]
+        return a, b[:, inputs], c[rows], d[np.ix_(rows, inputs)]
+
+    def _position(self, names: Sequence[str], name: str, role: str) -> int:
+        if name not in names:
+            raise IdentificationError(f"{self.name}: no {role} {name!r} (has {list(names)})")
+        return list(names).index(name)
 
     @staticmethod
     def _chain(values: Sequence[float]) -> np.ndarray:
@@ -406,11 +433,28 @@ def identify_oscillator(data: IdentificationData, *, masses: int, friction: bool
     if method == "lm":
         from panto.identification.estimation.least_squares import fit_least_squares
 
-        return fit_least_squares(structure, data, free=free, initial=start, bounds=bounds,
-                                 executor=executor, progress=progress, **options)
-    if method == "nsga2":
-        return _identify_pareto(structure, data, free, start, bounds, executor, progress, options)
-    raise IdentificationError(f"unknown method {method!r}: 'lm' or 'nsga2'")
+        result = fit_least_squares(structure, data, free=free, initial=start, bounds=bounds,
+                                   executor=executor, progress=progress, **options)
+    elif method == "nsga2":
+        result = _identify_pareto(structure, data, free, start, bounds, executor, progress,
+                                  options)
+    else:
+        raise IdentificationError(f"unknown method {method!r}: 'lm' or 'nsga2'")
+    return _with_levels(result)
+
+
+def _with_levels(result: IdentificationResult) -> IdentificationResult:
+    """The result saying how the levels are handled: physically, by ``y_0`` (the springs' rest
+    height, held at its start: the first ``eta`` sample unless given) and the estimated
+    ``F_0``, ``y_cb_offset``; nothing is removed from the data."""
+    from dataclasses import replace
+
+    level_names = [n for n in ("F_0", "y_cb_offset") if n in result.free]
+    text = (f"levels kept in the data: y_0 = {result.parameters['y_0']:.6g} m "
+            f"({'estimated' if 'y_0' in result.free else 'held'})"
+            + (f", {' and '.join(level_names)} estimated" if level_names else ""))
+    return replace(result, message=f"{result.message}; {text}",
+                   details={**result.details, "levels": {"centred": False, "message": text}})
 
 
 def _identify_pareto(structure: OscillatorStructure, data: IdentificationData,

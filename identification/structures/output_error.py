@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import math
 import re
+from dataclasses import replace
 from typing import Any, Mapping, Sequence
 
 import numpy as np
@@ -263,20 +264,55 @@ def linear_output_error_from_data(data: IdentificationData, order: int, *, input
                                   centre: bool | None = None) -> LinearOutputError:
     """An OE structure of `order` with ARX start values from `data` (the training run).
 
-    ``centre=None`` centres (inputs and outputs about their means) when some signal's mean is
-    larger than three standard deviations, i.e. when it sits at an operating point far from zero.
+    ``centre=None`` decides from the data whether to remove the means (inputs and outputs about
+    their means, the references ``u_ref``, ``y_ref`` added back in the simulator): yes when some
+    signal's mean is larger than three standard deviations (an operating point far from zero),
+    else yes only when the centred ARX start simulates (free run) with less than half the
+    uncentred one's squared error, i.e. when the data carry a level that a model from rest
+    through zero cannot produce; data without levels keep ``u_ref = y_ref = 0``.
     """
     outputs = np.where(np.isfinite(data.outputs), data.outputs, np.nan)
     u_mean, y_mean = data.inputs.mean(axis=0), np.nanmean(outputs, axis=0)
     if centre is None:
         far = np.abs(np.r_[u_mean, y_mean]) > 3 * np.r_[data.inputs.std(axis=0),
                                                          np.nanstd(outputs, axis=0)]
-        centre = bool(far.any())
+        centre = bool(far.any()) or _centring_helps(data, order, input_delay, u_mean, y_mean)
     u_ref = u_mean if centre else np.zeros_like(u_mean)
     y_ref = y_mean if centre else np.zeros_like(y_mean)
     initial = estimate_arx(data, order, input_delay, u_ref, y_ref)
     return LinearOutputError(data.input_names, data.output_names, order, input_delay=input_delay,
                              initial=initial, input_reference=u_ref, output_reference=y_ref)
+
+
+def _centring_helps(data: IdentificationData, order: int, input_delay: int, u_mean: np.ndarray,
+                    y_mean: np.ndarray) -> bool:
+    """Whether the centred ARX start's free-run squared error is below half the uncentred one's."""
+    errors = []
+    for u_ref, y_ref in ((np.zeros_like(u_mean), np.zeros_like(y_mean)), (u_mean, y_mean)):
+        initial = estimate_arx(data, order, input_delay, u_ref, y_ref)
+        model = LinearOutputError(data.input_names, data.output_names, order,
+                                  input_delay=input_delay, initial=initial,
+                                  input_reference=u_ref, output_reference=y_ref)
+        try:
+            residual = data.outputs - model.simulate({}, data)
+        except IdentificationError:  # an unusable start: judge by the other one
+            residual = np.full(data.outputs.shape, np.inf)
+        errors.append(float(np.nansum(residual ** 2)))
+    return errors[1] < 0.5 * errors[0]
+
+
+def describe_levels(structure: LinearOutputError) -> dict[str, Any]:
+    """How the structure handles constant levels, for a result's ``details["levels"]`` and its
+    message: the means removed before fitting (added back in the simulator), or none."""
+    centred = bool(np.any(structure.input_reference) or np.any(structure.output_reference))
+    names = list(structure.input_names) + list(structure.output_names)
+    text = (f"removed the means of {', '.join(names)} before fitting; they are added back in "
+            "the simulator") if centred else "no levels removed (signals used as they are)"
+    return {"centred": centred, "message": text,
+            "input_reference": dict(zip(structure.input_names,
+                                        structure.input_reference.tolist())),
+            "output_reference": dict(zip(structure.output_names,
+                                         structure.output_reference.tolist()))}
 
 
 def order_of(name: str) -> int | None:
@@ -288,16 +324,20 @@ def order_of(name: str) -> int | None:
 def identify_linear_output_error(data: IdentificationData, *, order: int = 4, executor=None,
                                  progress=None, input_delay: int = 1, centre: bool | None = None,
                                  **options: Any) -> IdentificationResult:
-    """ARX start, then output error by :func:`~panto.identification.estimation.least_squares.fit_least_squares`."""
+    """ARX start, then output error by :func:`~panto.identification.estimation.least_squares.fit_least_squares`;
+    the result's message and ``details["levels"]`` say whether the means were removed."""
     from panto.identification.estimation.least_squares import fit_least_squares
 
     structure = linear_output_error_from_data(data, order, input_delay=input_delay, centre=centre)
     options.pop("fixed", None)
     options.pop("method", None)
     free = options.pop("free", None) or structure.parameter_names
-    return fit_least_squares(structure, data, free=free, executor=executor, progress=progress,
-                             **options)
+    result = fit_least_squares(structure, data, free=free, executor=executor, progress=progress,
+                               **options)
+    levels = describe_levels(structure)
+    return replace(result, message=f"{result.message}; {levels['message']}",
+                   details={**result.details, "levels": levels})
 
 
-__all__ = ["LinearOutputError", "linear_output_error_from_data", "estimate_arx",
+__all__ = ["LinearOutputError", "linear_output_error_from_data", "estimate_arx", "describe_levels",
            "identify_linear_output_error", "order_of", "FEEDBACK_EFFECTS"]

@@ -129,6 +129,14 @@ class _PhysicalBase(ModelStructure):
         """:data:`BOUNDS` for :attr:`parameter_names`."""
         return {n: BOUNDS[n] for n in self.parameter_names}
 
+    def units(self) -> dict[str, str]:
+        """Unit of every parameter: the Pantograph parameter set's (thesis Table 4.1); ``eta_delay``
+        in s."""
+        from panto.fmu_src.models import default_parameters
+
+        specs = default_parameters("Pantograph")
+        return {n: "s" if n == DELAY else specs.spec(n).unit for n in self.parameter_names}
+
     def parameter_vector(self, parameters: Mapping[str, float]) -> np.ndarray:
         """The model's full parameter vector: defaults, ``fixed``, then `parameters` (whose
         ``eta_delay``, not a model parameter, is ignored here)."""
@@ -205,6 +213,22 @@ class PhysicalLinear(_PhysicalBase):
         """``(A, B, C, D, x0, y0)`` for all outputs about the equilibrium at `u0`."""
         p = self.parameter_vector(parameters)
         return linearise(p, [float(u0[0]), float(u0[1])], _nominal_start(float(u0[0]), float(u0[1])))
+
+    def linear_system(self, parameters: Mapping[str, float], data: IdentificationData
+                      ) -> tuple[np.ndarray, ...]:
+        """Continuous ``(A, B, C, D)`` from `data`'s inputs to `data`'s outputs (their units),
+        linearised about the operating point of `data` (``operating_point``). The input delay
+        ``eta_delay`` is not part of it."""
+        u = self.model_inputs(parameters, data)
+        u0 = u.mean(axis=0) if self.operating_point == "mean" else u[0]
+        a, b, c, d, _, _ = self.linear_model(parameters, u0)
+        missing = [n for n in (*data.input_names, *data.output_names)
+                   if n not in INPUT_NAMES + OUTPUT_NAMES]
+        if missing:
+            raise IdentificationError(f"{self.name}: no signal(s) {missing}")
+        inputs = [INPUT_NAMES.index(n) for n in data.input_names]
+        rows = [OUTPUT_NAMES.index(n) for n in data.output_names]
+        return a, b[:, inputs], c[rows], d[np.ix_(rows, inputs)]
 
     def deviation_model(self, parameters: Mapping[str, float], data: IdentificationData
                         ) -> tuple[np.ndarray, ...]:

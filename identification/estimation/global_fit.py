@@ -1,0 +1,492 @@
+"""Fits that start where the data points and say whether they reached the global optimum.
+
+An output-error fit from a structure's default values can stop in a local minimum far from the
+truth. :func:`fit_global` therefore starts the bounded Levenberg-Marquardt of
+:func:`~panto.identification.estimation.least_squares.fit_least_squares` from three kinds of
+points and compares where they end:
+
+1. the structure's defaults (what a plain fit does);
+2. data-driven starts (:func:`initial_from_data`): the *best linear approximation* of the data
+   (:func:`best_linear_approximation`, no structure involved) is matched by the structure's own
+   frequency response, which needs no time simulation and is cheap, from many quasi-random starts;
+3. a few random perturbations of the best point found, ``perturbation_size`` standard deviations
+   of its estimate (at most ``perturbation_cap``): a lightly damped mode leaves a valley in the
+   output-error cost narrower than its damping ratio, so fixed-size perturbations (tried: 5 %
+   and 10 % on the three-mass plant of ``tests/test_global_fit.py``) mostly land outside it.
+
+The result is the best run, with a verdict in ``message`` and ``details["global_fit"]``: how
+many starts reached the best cost within ``cost_tolerance`` and whether their free parameters
+agree ("global optimum found: k of n starts agree", or "not shown: best starts disagree on ...").
+A global optimum is claimed only when at least two starts that are not perturbations of the
+best point (the defaults, distinct data-driven starts) reach it: perturbations only show that
+the fit returns to its minimum.
+
+Best linear approximation (H1)
+    Welch cross-spectra (Hann window, 50 % overlap, mean removed per segment) with ``G_yu[i, j] =
+    E[Y_i conj(U_j)]`` and ``G_uu[k, j] = E[U_k conj(U_j)]``; per frequency the multi-input
+    estimate ``H = G_yu G_uu^-1``, the multiple coherence ``gamma_i^2 = (H G_uu H^H)_ii /
+    G_yy,i`` and the standard error of every element (Bendat & Piersol, *Random Data*, 4th ed.,
+    sec. 9.3: a regression per frequency over ``n_d`` averages),
+
+    .. math::
+
+        \\sigma^2(\\hat H_{ij}) = \\frac{(1 - \\gamma_i^2)\\; G_{yy,i} [G_{uu}^{-1}]_{jj}}{n_d - m},
+
+    ``m`` inputs, ``n_d`` the equivalent number of independent averages (the segments divided by
+    1.056 for Hann at 50 % overlap). An element is *trusted* where its relative standard error
+    is below ``max_relative_error`` and the coherence above ``min_coherence``: an input that is
+    not excited at a frequency gives a large ``[G_uu^-1]_jj`` and drops out by itself.
+
+Structure frequency response
+    A structure offers ``linear_system(parameters, data) -> (A, B, C, D)``, the continuous model
+    from the data's inputs to its outputs at the data's operating point. It is compared with the
+    H1 estimate through its exact discretisation with the structure's input hold (``hold``
+    attribute, first-order hold by default): in modal coordinates ``A = V diag(lambda) V^-1``,
+    ``mu = exp(lambda T)``, ``g_0 = (mu - 1) / lambda``, ``g_1 = (mu - 1 - lambda T) /
+    (lambda^2 T)`` (0 for a zero-order hold) and ``H(z) = C V diag((g_0 + (z - 1) g_1) / (z -
+    mu)) V^-1 B + D`` at ``z = exp(j omega T)`` (from ``x[k+1] = Phi x[k] + Gamma_0 u[k] +
+    Gamma_1 (u[k+1] - u[k])``); a defective ``A`` takes the matrix exponential instead.
+
+Mapping to the parameters
+    The residual of a candidate is ``(H(theta) - H_hat) / max(sigma, floor |H_hat|)`` over the
+    trusted elements (real and imaginary parts): a coherence-weighted complex error, which
+    approximates the output-error cost of white measurement noise. Parameters are the fit's
+    transformed ones (logarithms for positive bounds), within the bounds. Parameters that do not
+    change the frequency response (offsets such as ``F_0``) are left out and fitted in the time
+    domain alone before the full fit from each data-driven start. ``screening`` Sobol points over
+    the bounds (plus the defaults) are evaluated, the best ``starts`` are polished with
+    :func:`scipy.optimize.least_squares` (``"trf"``), and the best distinct ones are returned.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from dataclasses import dataclass
+from typing import Any, Callable, Mapping, Sequence
+
+import numpy as np
+from scipy import optimize
+from scipy.stats import qmc
+
+from panto.identification.estimation.base import (IdentificationData, IdentificationError,
+                                                  IdentificationResult, ModelStructure)
+from panto.identification.estimation.frequency_response import (
+    BestLinearApproximation, best_linear_approximation, discrete_frequency_response)
+from panto.identification.estimation.least_squares import fit_least_squares, make_problem
+
+Progress = Callable[[str], None]
+
+
+@dataclass(frozen=True)
+class FrequencyFitOptions:
+    """How :func:`initial_from_data` maps the best linear approximation to parameters."""
+
+    screening: int = 256
+    """Sobol points (in the transformed bounds) whose frequency-response cost is evaluated."""
+    starts: int = 3
+    """Best distinct screening points polished by ``scipy.optimize.least_squares``."""
+    candidates: int = 3
+    """Distinct candidates returned at most."""
+    max_evaluations: int = 5000
+    """Frequency-response evaluations per polished start (finite-difference columns included)."""
+    relative_floor: float = 0.02
+    """Lower limit of the standard error used as weight, relative to ``|H_hat|``."""
+    distinct: float = 0.05
+    """Two candidates are the same when no transformed parameter differs by more."""
+    seed: int = 0
+    """Seed of the scrambled Sobol sequence."""
+
+
+@dataclass(frozen=True)
+class GlobalFitOptions:
+    """How :func:`fit_global` starts, budgets and judges its time-domain fits."""
+
+    data_starts: int = 2
+    """Data-driven starts (from :func:`initial_from_data`) fitted in the time domain."""
+    perturbations: int = 2
+    """Random perturbations of the best point, fitted in the time domain."""
+    perturbation_size: float = 3.0
+    """Standard deviation of a perturbation in standard deviations of the best fit's estimate
+    (its covariance; a lightly damped mode leaves a narrow valley in the output-error cost)."""
+    perturbation_cap: float = 0.2
+    """Largest standard deviation of a perturbation in transformed parameters (0.2: 20 %)."""
+    max_evaluations: int = 400
+    """Model simulations per time-domain start."""
+    cost_tolerance: float = 1e-3
+    """A start reaches the best cost when its cost is within this fraction of it."""
+    parameter_tolerance: float = 0.05
+    """Free parameters agree when within this fraction (or two standard deviations)."""
+    same_start: float = 0.05
+    """A data-driven start within this transformed distance of the default fit's result is not
+    refitted (it would converge to the same point)."""
+    executor: Any = None
+    """Evaluates Jacobian columns in parallel (``concurrent.futures.Executor``)."""
+    frequency: FrequencyFitOptions = FrequencyFitOptions()
+    """Options of the frequency-domain mapping."""
+    seed: int = 0
+    """Seed of the perturbations."""
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A data-driven start: all parameter values and how well they match the data's response.
+
+    ``cost`` is half the sum of squared weighted residuals, ``rms`` their root mean square (about
+    1 when the model matches within the estimate's standard errors).
+    """
+
+    parameters: Mapping[str, float]
+    cost: float
+    rms: float
+
+
+class _FrequencyProblem:
+    """The weighted frequency-response residual of a structure over the trusted elements."""
+
+    def __init__(self, structure: ModelStructure, data: IdentificationData, problem: Any,
+                 bla: BestLinearApproximation, floor: float) -> None:
+        self.structure, self.data, self.problem = structure, data, problem
+        self.hold = str(getattr(structure, "hold", "foh"))
+        mask = bla.trusted
+        if not mask.any():
+            raise IdentificationError(f"{data.source or 'data'}: no frequency holds a trusted "
+                                      "response estimate (inputs not excited or coherence low)")
+        keep = mask.any(axis=(1, 2))
+        self.frequency, self.mask = bla.frequency[keep], mask[keep]
+        self.target = bla.response[keep][self.mask]
+        weight = np.maximum(bla.std[keep][self.mask], floor * np.abs(self.target))
+        self.weight = 1.0 / np.maximum(weight, 1e-300)
+        self.period = bla.period
+
+    def response(self, parameters: Mapping[str, float]) -> np.ndarray:
+        """The structure's discrete frequency response at the kept frequencies."""
+        system = self.structure.linear_system(dict(parameters), self.data)
+        return discrete_frequency_response(system, self.frequency, self.period, self.hold,
+                                           stable=True)
+
+    def residuals(self, z: np.ndarray) -> np.ndarray:
+        """Real and imaginary weighted errors at the transformed free parameters `z`."""
+        error = (self.response(self.problem.parameters(z))[self.mask] - self.target) * self.weight
+        return np.concatenate([error.real, error.imag])
+
+
+#: Residual of an invalid candidate (unstable, singular): large, so that steps avoid it.
+INVALID_RESIDUAL = 1e6
+
+
+def _safe(residuals: Callable[[np.ndarray], np.ndarray], size: int
+          ) -> Callable[[np.ndarray], np.ndarray]:
+    """Residuals, or :data:`INVALID_RESIDUAL` everywhere where the structure is invalid."""
+    def call(z: np.ndarray) -> np.ndarray:
+        try:
+            r = residuals(z)
+            return r if np.all(np.isfinite(r)) else np.full(size, INVALID_RESIDUAL)
+        except (ValueError, ArithmeticError, RuntimeError, np.linalg.LinAlgError):
+            return np.full(size, INVALID_RESIDUAL)
+    return call
+
+
+def frequency_blind(frequency_problem: _FrequencyProblem, z0: np.ndarray) -> np.ndarray:
+    """Mask of the free parameters that do not change the frequency response at `z0`."""
+    base = frequency_problem.residuals(z0)
+    blind = np.zeros(len(z0), bool)
+    for k in range(len(z0)):
+        dz = np.zeros(len(z0))
+        dz[k] = 0.1
+        try:
+            change = frequency_problem.residuals(z0 + dz) - base
+        except (ValueError, ArithmeticError, RuntimeError, np.linalg.LinAlgError):
+            continue
+        blind[k] = np.max(np.abs(change)) <= 1e-9 * max(np.max(np.abs(base)), 1e-300)
+    return blind
+
+
+def initial_from_data(structure: ModelStructure, data: IdentificationData, free: Sequence[str],
+                      *, initial: Mapping[str, float] | None = None,
+                      bounds: Mapping[str, tuple[float, float]] | None = None,
+                      bla: BestLinearApproximation | None = None,
+                      options: FrequencyFitOptions = FrequencyFitOptions()) -> list[Candidate]:
+    """Data-driven start values: the structure's frequency response fitted to the data's.
+
+    Parameters
+    ----------
+    structure : ModelStructure
+        Must have ``linear_system(parameters, data) -> (A, B, C, D)``.
+    data : IdentificationData
+    free : sequence of str
+        Parameters to map; the others keep `initial` or their nominal values.
+    initial, bounds : mapping, optional
+        As for :func:`~panto.identification.estimation.least_squares.fit_least_squares`.
+    bla : BestLinearApproximation, optional
+        Default :func:`best_linear_approximation` of `data`.
+    options : FrequencyFitOptions
+
+    Returns
+    -------
+    list of Candidate
+        Best first, distinct; frequency-blind parameters (offsets) keep their start values.
+    """
+    if not callable(getattr(structure, "linear_system", None)):
+        raise IdentificationError(f"{structure.name} has no linear_system: no data-driven start")
+    problem, z0, lower, upper = make_problem(structure, data, free, initial, bounds)
+    bla = bla if bla is not None else best_linear_approximation(data)
+    frequency_problem = _FrequencyProblem(structure, data, problem, bla, options.relative_floor)
+    z_start = np.clip(z0, lower, upper)
+    size = len(frequency_problem.residuals(z_start))
+    relevant = ~frequency_blind(frequency_problem, z_start)
+    lo = np.where(np.isfinite(lower), lower, z_start - 3.0)[relevant]
+    hi = np.where(np.isfinite(upper), upper, z_start + 3.0)[relevant]
+
+    def full(x: np.ndarray) -> np.ndarray:
+        z = z_start.copy()
+        z[relevant] = x
+        return z
+
+    cost = _safe(lambda x: frequency_problem.residuals(full(x)), size)
+    sobol = qmc.Sobol(int(relevant.sum()), scramble=True, seed=options.seed)
+    points = [z_start[relevant]] + list(lo + (hi - lo) * sobol.random(options.screening))
+    screened = sorted(((_half_square(cost(x)), x) for x in points), key=lambda pair: pair[0])
+    polished = []
+    for _, x in _distinct(screened, options.starts, options.distinct):
+        fit = optimize.least_squares(cost, np.clip(x, lo, hi), bounds=(lo, hi), method="trf",
+                                     max_nfev=max(1, options.max_evaluations // (len(x) + 1)),
+                                     diff_step=1e-6,
+                                     x_scale=1.0)
+        polished.append((_half_square(fit.fun), fit.x))
+    polished.sort(key=lambda pair: pair[0])
+    return [Candidate(problem.parameters(full(x)), c, math.sqrt(2 * c / size))
+            for c, x in _distinct(polished, options.candidates, options.distinct)]
+
+
+def _half_square(r: np.ndarray) -> float:
+    """``r.r / 2``, infinite for an invalid candidate's residual."""
+    return math.inf if np.all(r == INVALID_RESIDUAL) else 0.5 * float(r @ r)
+
+
+def _distinct(ranked: list[tuple[float, np.ndarray]], count: int, distance: float
+              ) -> list[tuple[float, np.ndarray]]:
+    """The first `count` valid points of `ranked` that differ from each other by `distance`."""
+    chosen: list[tuple[float, np.ndarray]] = []
+    for c, x in ranked:
+        if math.isfinite(c) and all(np.max(np.abs(x - y)) > distance for _, y in chosen):
+            chosen.append((c, x))
+        if len(chosen) == count:
+            break
+    return chosen
+
+
+# --- the global fit -------------------------------------------------------------------------
+
+def fit_global(structure: ModelStructure, data: IdentificationData, *, free: Sequence[str],
+               initial: Mapping[str, float] | None = None,
+               bounds: Mapping[str, tuple[float, float]] | None = None,
+               options: GlobalFitOptions = GlobalFitOptions(), progress: Progress | None = None,
+               **least_squares: Any) -> IdentificationResult:
+    """Fit from the defaults, from the data and from perturbations; the best, with a verdict.
+
+    Parameters
+    ----------
+    structure : ModelStructure
+        With ``linear_system`` for data-driven starts; without it, the defaults and the
+        perturbations only (said in the message).
+    data : IdentificationData
+    free : sequence of str
+    initial, bounds : mapping, optional
+        As for :func:`~panto.identification.estimation.least_squares.fit_least_squares`.
+    options : GlobalFitOptions
+    progress : callable, optional
+        Receives a line per start.
+    **least_squares
+        Further options of every
+        :func:`~panto.identification.estimation.least_squares.fit_least_squares` run
+        (``tolerance``, ``step``, ``identifiability_threshold``).
+
+    Returns
+    -------
+    IdentificationResult
+        The best run; ``message`` ends with the verdict; ``details["global_fit"]`` holds
+        ``verdict``, ``global_optimum`` (bool), ``agreeing``, ``independent`` (agreeing starts
+        that are not perturbations), ``starts`` (origin, cost, fit,
+        parameters, whether it agrees), ``disagreeing`` parameters, ``data_driven`` (why not, or
+        the candidates' frequency-response costs) and ``best_linear_approximation`` (summary).
+    """
+    started = time.perf_counter()
+    say = progress or (lambda line: None)
+    problem, _, lower, upper = make_problem(structure, data, free, initial, bounds)
+    run = _Runner(structure, data, tuple(free), initial, bounds, options, least_squares)
+    runs = [run("default", dict(initial or {}))]
+    say(f"{structure.name}: default start: {_fits(runs[0][1])}")
+    candidates, note, bla = _data_driven(structure, data, free, initial, bounds, options, say)
+    for k, candidate in enumerate(candidates[:options.data_starts], 1):
+        distance = _distance(problem, candidate.parameters, runs[0][1].parameters,
+                             note.get("blind", ()))
+        if distance < options.same_start:
+            runs.append((f"data-driven {k}", runs[0][1], "coincides with the default result"))
+            say(f"{structure.name}: data-driven start {k} coincides with the default result")
+            continue
+        runs.append(run(f"data-driven {k}", candidate.parameters, offsets=note.get("blind", ())))
+        say(f"{structure.name}: data-driven start {k}: {_fits(runs[-1][1])}")
+    rng = np.random.default_rng(options.seed)
+    best = min((r for _, r, _ in runs), key=_cost)
+    z_best = problem.z_of(np.array([best.parameters[n] for n in free]))
+    spread = _spread(problem, best, z_best, options)
+    for k in range(options.perturbations):
+        z = np.clip(z_best + spread * rng.normal(size=len(z_best)), lower, upper)
+        runs.append(run(f"perturbation {k + 1}", problem.parameters(z)))
+        say(f"{structure.name}: perturbation {k + 1}: {_fits(runs[-1][1])}")
+    return _verdict(runs, free, options, note, bla, started)
+
+
+def _spread(problem: Any, best: IdentificationResult, z_best: np.ndarray,
+            options: GlobalFitOptions) -> np.ndarray:
+    """Standard deviation of the perturbations per transformed parameter: ``perturbation_size``
+    standard deviations of the best fit (its covariance), at most ``perturbation_cap``."""
+    std = np.array([best.std.get(n, math.nan) for n in problem.free], float)
+    sigma_z = std / np.abs(problem.derivative(z_best))
+    sigma_z = np.where(np.isfinite(sigma_z), sigma_z, options.perturbation_cap)
+    return np.minimum(options.perturbation_size * sigma_z, options.perturbation_cap)
+
+
+class _Runner:
+    """One time-domain start: optionally the offsets alone first, then all free parameters."""
+
+    def __init__(self, structure: ModelStructure, data: IdentificationData, free: tuple[str, ...],
+                 initial: Mapping[str, float] | None,
+                 bounds: Mapping[str, tuple[float, float]] | None, options: GlobalFitOptions,
+                 least_squares: Mapping[str, Any]) -> None:
+        self.structure, self.data, self.free, self.bounds = structure, data, free, bounds
+        self.initial, self.options, self.extra = dict(initial or {}), options, dict(least_squares)
+
+    def __call__(self, origin: str, start: Mapping[str, float], offsets: Sequence[str] = ()
+                 ) -> tuple[str, IdentificationResult, str]:
+        limits = {**self.structure.bounds(), **dict(self.bounds or {})}
+        start = {**self.initial, **dict(start)}
+        start.update({n: min(max(start[n], limits[n][0]), limits[n][1])  # rounding in z
+                      for n in self.free if n in start})
+        evaluations = 0
+        offsets = [n for n in offsets if n in self.free]
+        if offsets:
+            first = fit_least_squares(self.structure, self.data, free=offsets, initial=start,
+                                      bounds=self.bounds, executor=self.options.executor,
+                                      max_evaluations=max(20, self.options.max_evaluations // 8),
+                                      **self.extra)
+            evaluations = first.n_evaluations
+            start = {**start, **{n: first.parameters[n] for n in offsets}} \
+                if all(math.isfinite(v) for v in first.fit.values()) else start
+        result = fit_least_squares(self.structure, self.data, free=self.free, initial=start,
+                                   bounds=self.bounds, executor=self.options.executor,
+                                   max_evaluations=self.options.max_evaluations, **self.extra)
+        return origin, dataclasses.replace(
+            result, n_evaluations=result.n_evaluations + evaluations), ""
+
+
+def _data_driven(structure: ModelStructure, data: IdentificationData, free: Sequence[str],
+                 initial: Mapping[str, float] | None,
+                 bounds: Mapping[str, tuple[float, float]] | None, options: GlobalFitOptions,
+                 say: Progress) -> tuple[list[Candidate], dict[str, Any], Any]:
+    """The candidates of :func:`initial_from_data`, or none and why."""
+    if options.data_starts < 1:
+        return [], {"used": False, "why": "no data-driven starts requested"}, None
+    if not callable(getattr(structure, "linear_system", None)):
+        why = f"{structure.name} has no linear_system: defaults and perturbations only"
+        say(f"{structure.name}: {why}")
+        return [], {"used": False, "why": why}, None
+    try:
+        bla = best_linear_approximation(data)
+        candidates = initial_from_data(structure, data, free, initial=initial, bounds=bounds,
+                                       bla=bla, options=options.frequency)
+        problem, z0, _, _ = make_problem(structure, data, free, initial, bounds)
+        blind = frequency_blind(_FrequencyProblem(structure, data, problem, bla,
+                                                  options.frequency.relative_floor), z0)
+    except (NotImplementedError, IdentificationError, ValueError, ArithmeticError,
+            np.linalg.LinAlgError) as error:
+        why = f"no data-driven start: {error}"
+        say(f"{structure.name}: {why}")
+        return [], {"used": False, "why": why}, None
+    say(f"{structure.name}: {len(candidates)} data-driven start(s) from the frequency response, "
+        "weighted error rms " + ", ".join(f"{c.rms:.3g}" for c in candidates))
+    return candidates, {"used": True, "blind": [n for n, b in zip(free, blind) if b],
+                        "candidates": [{"cost": c.cost, "rms": c.rms,
+                                        "parameters": {n: c.parameters[n] for n in free}}
+                                       for c in candidates]}, bla
+
+
+def _verdict(runs: list[tuple[str, IdentificationResult, str]], free: Sequence[str],
+             options: GlobalFitOptions, note: Mapping[str, Any], bla: Any,
+             started: float) -> IdentificationResult:
+    """The best run with the agreement of the starts in its message and details."""
+    best = min((r for _, r, _ in runs), key=_cost)
+    floor = _cost(best)
+    starts, agreeing, disagreeing = [], 0, set()
+    for origin, result, remark in runs:
+        reached = _cost(result) <= floor * (1 + options.cost_tolerance) + 1e-300
+        apart = [n for n in free if reached and not _agree(result, best, n, options)]
+        disagreeing.update(apart)
+        agreeing += reached and not apart
+        starts.append({"origin": origin, "cost": _cost(result), "fit": dict(result.fit),
+                       "message": remark or result.message, "reached_best_cost": bool(reached),
+                       "parameters": {n: result.parameters[n] for n in free},
+                       "agrees": bool(reached and not apart)})
+    n = len(runs)
+    reached = sum(s["reached_best_cost"] for s in starts)
+    independent = sum(s["agrees"] for s in starts if not s["origin"].startswith("perturbation"))
+    if disagreeing:
+        verdict = "global optimum not shown: best starts disagree on " + \
+            ", ".join(name for name in free if name in disagreeing)
+    elif independent >= 2:
+        verdict = f"global optimum found: {agreeing} of {n} starts agree, {independent} of " \
+            "them not perturbations"
+    else:
+        verdict = f"global optimum not shown: {reached} of {n} starts reached the best cost, " \
+            f"{independent} of them not a perturbation of it"
+    if not math.isfinite(floor):
+        verdict, independent = "global optimum not shown: no start gave a valid model", 0
+    coincided = sum(1 for _, _, remark in runs if remark)
+    if coincided:
+        verdict += f" ({coincided} data-driven start(s) coincided with the default result and " \
+            "were not refitted)"
+    if not note.get("used"):
+        verdict += f" ({note.get('why')})"
+    details = {**best.details, "global_fit": {
+        "verdict": verdict, "global_optimum": bool(independent >= 2 and not disagreeing),
+        "agreeing": agreeing, "independent": independent, "starts": starts,
+        "disagreeing": sorted(disagreeing),
+        "data_driven": dict(note),
+        "best_linear_approximation": bla.summary() if bla is not None else None}}
+    evaluations = sum(r.n_evaluations for _, r, remark in runs if not remark)
+    return dataclasses.replace(best, message=f"{best.message}; {verdict}", details=details,
+                               n_evaluations=evaluations,
+                               wall_time=time.perf_counter() - started)
+
+
+def _agree(result: IdentificationResult, best: IdentificationResult, name: str,
+           options: GlobalFitOptions) -> bool:
+    a, b = result.parameters[name], best.parameters[name]
+    std = best.std.get(name, math.nan)
+    limit = max(options.parameter_tolerance * abs(b), 2 * std if math.isfinite(std) else 0.0)
+    return abs(a - b) <= limit
+
+
+def _distance(problem: Any, first: Mapping[str, float], second: Mapping[str, float],
+              blind: Sequence[str]) -> float:
+    """Largest transformed difference over the free parameters that shape the response."""
+    za = problem.z_of(np.array([first[n] for n in problem.free]))
+    zb = problem.z_of(np.array([second[n] for n in problem.free]))
+    keep = np.array([n not in blind for n in problem.free])
+    return float(np.max(np.abs(za - zb)[keep])) if keep.any() else 0.0
+
+
+def _cost(result: IdentificationResult) -> float:
+    cost = result.details.get("cost", math.nan)
+    return float(cost) if math.isfinite(cost) else math.inf
+
+
+def _fits(result: IdentificationResult) -> str:
+    return ", ".join(f"{k} {v:.2f} %" for k, v in result.fit.items()) + \
+        f" after {result.n_evaluations} evaluations ({result.message})"
+
+
+__all__ = ["BestLinearApproximation", "FrequencyFitOptions", "GlobalFitOptions", "Candidate",
+           "best_linear_approximation", "discrete_frequency_response", "frequency_blind",
+           "initial_from_data", "fit_global"]
