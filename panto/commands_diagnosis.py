@@ -68,6 +68,7 @@ def _roles(text: str | None):
 def run_diagnose(args: argparse.Namespace) -> int:
     """Load both runs, diagnose, print the verdict, write the report."""
     from panto.identification.diagnosis.pipeline import DiagnosisOptions, diagnose
+    from panto.identification.estimation.global_fit import GlobalFitOptions
     from panto.identification.diagnosis.report import write_report
     from panto.identification.diagnosis.effects import EFFECTS
 
@@ -80,7 +81,8 @@ def run_diagnose(args: argparse.Namespace) -> int:
         f"{1 / train.sample_period:g} Hz), validation {args.validate} ({len(validation)} samples)")
     search = DiagnosisOptions(candidates=tuple(args.candidates or EFFECTS),
                               roles=_roles(args.roles), max_effects=args.max_effects,
-                              folds=args.folds)
+                              folds=args.folds,
+                              global_fit=GlobalFitOptions() if args.global_fit else None)
     result = diagnose(train, validation, structure=args.model, structure_options=options,
                       options=search, progress=say)
     say(f"verdict: {result.verdict}" + (f" ({' then '.join(result.effects)})"
@@ -134,6 +136,9 @@ def register(add: Callable) -> None:
                    "cutoff=0.2, input_delay=1)")
     p.add_argument("--max-effects", type=int, default=3)
     p.add_argument("--folds", type=int, default=4)
+    p.add_argument("--global-fit", action="store_true",
+                   help="fit the nominal from the data's frequency response and several starts, "
+                        "and say whether the global optimum was found (slower)")
     p.add_argument("--out", help="folder for report.html, report.json and the plots")
     p.add_argument("--json", help="also write the JSON summary here")
 

@@ -49,6 +49,17 @@ def test_h1_estimate_of_a_two_input_system_matches_its_response_within_its_stand
     assert np.mean(errors > 3.0) < 0.01
 
 
+def test_an_input_held_constant_has_no_trusted_response():
+    rng = np.random.default_rng(7)
+    n = 8192
+    u = np.column_stack([rng.normal(size=n), np.full(n, 4.5)])  # pressure held constant
+    y = signal.lfilter(*signal.butter(2, 0.3), u[:, 0]) + 0.1 * rng.normal(size=n)
+    data = IdentificationData(np.arange(n) / RATE, u, y[:, None], ("u", "p"), ("y",))
+    estimate = best_linear_approximation(data)
+    assert not estimate.trusted[:, :, 1].any()
+    assert estimate.trusted[:, 0, 0].sum() > 100
+
+
 @pytest.mark.parametrize("hold", ["foh", "zoh"])
 def test_discrete_response_agrees_with_scipys_discretisation(hold):
     a = np.array([[0.0, 1.0], [-400.0, -4.0]])
@@ -227,3 +238,79 @@ def test_the_three_mass_fit_starts_where_the_data_points_and_reaches_the_noise_f
     assert {"m2", "m3", "k3", "c3"} <= set(identified)
     for name in identified:
         assert result.parameters[name] == pytest.approx(TRUTH[name], rel=0.1), name
+
+
+# --- a valley: two parameters that enter only as their product ---------------------------------
+
+class _Product(ModelStructure):
+    """``y' = -w y + a b u``: only the product ``a b`` is seen; ``w`` is identifiable."""
+
+    name = "product"
+    input_names = ("u",)
+    output_names = ("y",)
+    parameter_names = ("a", "b", "w")
+
+    def nominal(self):
+        return {"a": 1.0, "b": 1.0, "w": 3.0}
+
+    def bounds(self):
+        return {"a": (0.05, 50.0), "b": (0.05, 50.0), "w": (0.3, 100.0)}
+
+    def linear_system(self, parameters, data):
+        p = {**self.nominal(), **parameters}
+        return (np.array([[-p["w"]]]), np.array([[p["a"] * p["b"]]]), np.eye(1),
+                np.zeros((1, 1)))
+
+    def simulate(self, parameters, data):
+        system = signal.lti(*self.linear_system(parameters, data))
+        return signal.lsim(system, data.inputs[:, 0], data.time)[1][:, None]
+
+
+def test_a_valley_is_named_and_left_out_of_the_agreement_while_the_cost_decides():
+    structure = _Product()
+    rng = np.random.default_rng(4)
+    n = 2048
+    t = np.arange(n) / 50.0
+    u = signal.lfilter(*signal.butter(2, 0.3), rng.normal(size=n))
+    blank = IdentificationData(t, u[:, None], np.zeros((n, 1)), ("u",), ("y",))
+    y = structure.simulate({"a": 2.0, "b": 3.0, "w": 8.0}, blank)[:, 0]
+    y = y + 0.02 * y.std() * rng.normal(size=n)
+    data = IdentificationData(t, u[:, None], y[:, None], ("u",), ("y",))
+    result = fit_global(structure, data, free=("a", "b", "w"),
+                        options=GlobalFitOptions(data_starts=2, perturbations=1))
+    report = result.details["global_fit"]
+    at_best = [s["parameters"] for s in report["starts"] if s["reached_best_cost"]]
+    assert {result.estimates[name].verdict for name in ("a", "b")} == {"not identifiable"}
+    assert result.estimates["w"].verdict == "identifiable"
+    assert max(p["a"] for p in at_best) > 1.1 * min(p["a"] for p in at_best)  # a real valley
+    for p in at_best:  # ... along which the product and the pole agree
+        assert p["a"] * p["b"] == pytest.approx(6.0, rel=0.02)
+        assert p["w"] == pytest.approx(8.0, rel=0.02)
+    assert report["global_optimum"] and report["independent"] >= 2, result.message
+    assert report["not_identifiable"] == ["a", "b"] and report["disagreeing"] == []
+    assert "global optimum found in cost" in result.message
+    assert "a, b not identifiable from this run (they form a valley" in result.message
+
+
+# --- panto identify --initial data -------------------------------------------------------------
+
+def test_panto_identify_initial_data_prints_the_verdict_and_keeps_it_in_result_json(tmp_path,
+                                                                                     capsys):
+    import json
+
+    from panto.cli import main
+    from test_identify_any_table import INPUTS, OUTPUTS, TRUTH as PLANT, _simulate_plant
+
+    _simulate_plant().to_csv(tmp_path / "train.csv", index=False)
+    code = main(["identify", str(tmp_path / "train.csv"), "--model", "two-mass", *INPUTS,
+                 *OUTPUTS, "--initial", "data", "--out", str(tmp_path / "out")])
+    printed = capsys.readouterr().out
+    report = json.loads((tmp_path / "out" / "result.json").read_text())
+    verdict = report["global_fit"]["verdict"]
+    assert code == 0
+    assert verdict.startswith("global optimum") and verdict in printed
+    assert [s["origin"] for s in report["global_fit"]["starts"]][:2] == ["default",
+                                                                       "data-driven 1"]
+    assert report["fixed_at_prior"] == {}  # the valley is named, not fixed
+    for name in ("k2", "m2"):
+        assert report["parameters"][name]["value"] == pytest.approx(PLANT[name], rel=0.05)

@@ -216,6 +216,11 @@ class DiagnosisOptions:
     """Blocked folds of the validation run for the improvement's spread."""
     max_evaluations: int = 400
     """Model simulations per least-squares fit."""
+    global_fit: GlobalFitOptions | None = None
+    """Fit the nominal with :func:`~panto.identification.estimation.global_fit.fit_global` (from the
+    defaults, from the data's frequency response and perturbations; its verdict on the global
+    optimum goes into the progress and the report's training fit message) instead of one run from
+    the defaults. Off by default: see :func:`fit_nominal`."""
 
     def __post_init__(self) -> None:
         unknown = [c for c in self.candidates if c not in EFFECTS]
@@ -261,10 +266,13 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
     fit_options = {"executor": executor, "max_evaluations": options.max_evaluations}
     say(f"diagnose: nominal {nominal.name}, {len(free)} free parameters, {len(train)} training "
         f"and {len(validation)} validation samples, outputs {list(train.output_names)}")
-    result = fit_nominal(nominal, free, train, progress=_indent(progress), **fit_options)
+    result = fit_nominal(nominal, free, train, progress=_indent(progress),
+                         global_fit=options.global_fit, **fit_options)
     model = _Model(nominal, dict(result.parameters), tuple(free), dict(result.std),
                    np.asarray(result.covariance, float))
     say("diagnose: nominal fit on training: " + _fits(result.fit))
+    if "global_fit" in result.details:
+        say("diagnose: nominal " + result.details["global_fit"]["verdict"])
     before, analysis_before, gap, fit_before = _where(model, validation, roles, say)
     search = _search(model, before, candidates,
                      _Search(train, validation, roles, options, fit_options, say))

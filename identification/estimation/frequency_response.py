@@ -126,7 +126,8 @@ def best_linear_approximation(data: IdentificationData, *, segment: int | None =
         top = 0.8 * fs / 2 if max_frequency is None else float(max_frequency)
         trusted = (std <= max_relative_error * np.abs(response)) & \
             (coherence >= min_coherence)[:, :, None] & \
-            ((freq > 0) & (freq <= top))[:, None, None] & np.isfinite(std)
+            ((freq > 0) & (freq <= top))[:, None, None] & np.isfinite(std) & \
+            (diag > 0)[:, None, :]  # an input not excited (constant) is dropped by pinv
     return BestLinearApproximation(freq, response, std, coherence, trusted, data.sample_period,
                                    float(averages), data.input_names, data.output_names)
 

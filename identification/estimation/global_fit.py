@@ -17,7 +17,10 @@ points and compares where they end:
 The result is the best run, with a verdict in ``message`` and ``details["global_fit"]``: how
 many starts reached the best cost within ``cost_tolerance`` and whether their free parameters
 agree ("global optimum found: k of n starts agree", or "not shown: best starts disagree on ...").
-A global optimum is claimed only when at least two starts that are not perturbations of the
+Parameters the best fit marks *not identifiable* (its ``estimates``) are left out of the
+parameter agreement and named: the starts then agree in cost and on the other parameters but
+may sit anywhere along the valley those parameters form ("global optimum found in cost: ...;
+p_gain, F_0 not identifiable from this run (they form a valley: ...)"). A global optimum is claimed only when at least two starts that are not perturbations of the
 best point (the defaults, distinct data-driven starts) reach it: perturbations only show that
 the fit returns to its minimum.
 
@@ -308,7 +311,8 @@ def fit_global(structure: ModelStructure, data: IdentificationData, *, free: Seq
         The best run; ``message`` ends with the verdict; ``details["global_fit"]`` holds
         ``verdict``, ``global_optimum`` (bool), ``agreeing``, ``independent`` (agreeing starts
         that are not perturbations), ``starts`` (origin, cost, fit,
-        parameters, whether it agrees), ``disagreeing`` parameters, ``data_driven`` (why not, or
+        parameters, whether it agrees), ``disagreeing`` parameters, ``not_identifiable`` (left
+        out of the agreement check), ``data_driven`` (why not, or
         the candidates' frequency-response costs) and ``best_linear_approximation`` (summary).
     """
     started = time.perf_counter()
@@ -336,6 +340,22 @@ def fit_global(structure: ModelStructure, data: IdentificationData, *, free: Seq
         runs.append(run(f"perturbation {k + 1}", problem.parameters(z)))
         say(f"{structure.name}: perturbation {k + 1}: {_fits(runs[-1][1])}")
     return _verdict(runs, free, options, note, bla, started)
+
+
+def fit_from_start(structure: ModelStructure, data: IdentificationData, *, free: Sequence[str],
+                   global_fit: GlobalFitOptions | None = None, **options: Any
+                   ) -> IdentificationResult:
+    """:func:`fit_least_squares` (`global_fit` None) or :func:`fit_global` with `global_fit`.
+
+    ``executor`` and ``max_evaluations`` in `options` override those of `global_fit`;
+    ``initial``, ``bounds``, ``progress`` and the rest go to every least-squares run.
+    """
+    if global_fit is None:
+        return fit_least_squares(structure, data, free=free, **options)
+    settings = dataclasses.replace(
+        global_fit, executor=options.pop("executor", global_fit.executor),
+        max_evaluations=int(options.pop("max_evaluations", global_fit.max_evaluations)))
+    return fit_global(structure, data, free=free, options=settings, **options)
 
 
 def _spread(problem: Any, best: IdentificationResult, z_best: np.ndarray,
@@ -418,10 +438,12 @@ def _verdict(runs: list[tuple[str, IdentificationResult, str]], free: Sequence[s
     """The best run with the agreement of the starts in its message and details."""
     best = min((r for _, r, _ in runs), key=_cost)
     floor = _cost(best)
+    valley = _not_identifiable(best, free)
+    judged = [n for n in free if n not in valley]
     starts, agreeing, disagreeing = [], 0, set()
     for origin, result, remark in runs:
         reached = _cost(result) <= floor * (1 + options.cost_tolerance) + 1e-300
-        apart = [n for n in free if reached and not _agree(result, best, n, options)]
+        apart = [n for n in judged if reached and not _agree(result, best, n, options)]
         disagreeing.update(apart)
         agreeing += reached and not apart
         starts.append({"origin": origin, "cost": _cost(result), "fit": dict(result.fit),
@@ -435,11 +457,14 @@ def _verdict(runs: list[tuple[str, IdentificationResult, str]], free: Sequence[s
         verdict = "global optimum not shown: best starts disagree on " + \
             ", ".join(name for name in free if name in disagreeing)
     elif independent >= 2:
-        verdict = f"global optimum found: {agreeing} of {n} starts agree, {independent} of " \
-            "them not perturbations"
+        verdict = f"global optimum found{' in cost' if valley else ''}: {agreeing} of {n} " \
+            f"starts agree, {independent} of them not perturbations"
     else:
         verdict = f"global optimum not shown: {reached} of {n} starts reached the best cost, " \
             f"{independent} of them not a perturbation of it"
+    if valley:
+        verdict += "; " + ", ".join(valley) + " not identifiable from this run " + \
+            _valley_remark(starts, valley, options)
     if not math.isfinite(floor):
         verdict, independent = "global optimum not shown: no start gave a valid model", 0
     coincided = sum(1 for _, _, remark in runs if remark)
@@ -451,13 +476,31 @@ def _verdict(runs: list[tuple[str, IdentificationResult, str]], free: Sequence[s
     details = {**best.details, "global_fit": {
         "verdict": verdict, "global_optimum": bool(independent >= 2 and not disagreeing),
         "agreeing": agreeing, "independent": independent, "starts": starts,
-        "disagreeing": sorted(disagreeing),
+        "disagreeing": sorted(disagreeing), "not_identifiable": list(valley),
         "data_driven": dict(note),
         "best_linear_approximation": bla.summary() if bla is not None else None}}
     evaluations = sum(r.n_evaluations for _, r, remark in runs if not remark)
     return dataclasses.replace(best, message=f"{best.message}; {verdict}", details=details,
                                n_evaluations=evaluations,
                                wall_time=time.perf_counter() - started)
+
+
+def _not_identifiable(best: IdentificationResult, free: Sequence[str]) -> list[str]:
+    """The free parameters the best fit's estimates mark "not identifiable" (not fixed)."""
+    estimates = best.estimates or {}
+    return [n for n in free if n in estimates and not estimates[n].fixed
+            and estimates[n].verdict == "not identifiable"]
+
+
+def _valley_remark(starts: Sequence[Mapping[str, Any]], valley: Sequence[str],
+                   options: GlobalFitOptions) -> str:
+    """Whether the starts at the best cost spread along the not-identifiable parameters."""
+    at_best = [s["parameters"] for s in starts if s["reached_best_cost"]]
+    spread = any(max(abs(a[n] - b[n]) for a in at_best for b in at_best)
+                 > options.parameter_tolerance * max(abs(b[n]) for b in at_best)
+                 for n in valley) if len(at_best) > 1 else False
+    return "(they form a valley: the starts at the best cost differ on them)" if spread else \
+        "(left out of the agreement check)"
 
 
 def _agree(result: IdentificationResult, best: IdentificationResult, name: str,
@@ -489,4 +532,4 @@ def _fits(result: IdentificationResult) -> str:
 
 __all__ = ["BestLinearApproximation", "FrequencyFitOptions", "GlobalFitOptions", "Candidate",
            "best_linear_approximation", "discrete_frequency_response", "frequency_blind",
-           "initial_from_data", "fit_global"]
+           "initial_from_data", "fit_global", "fit_from_start"]

@@ -104,6 +104,8 @@ def result_summary(result: IdentificationResult, *, data: IdentificationData,
         "first_fit": _first_fit(result),
         "residual_std": result.details.get("residual_std"),
     }
+    if "global_fit" in result.details:  # fit_global's verdict and its starts
+        summary["global_fit"] = result.details["global_fit"]
     if validation is not None:
         summary["validation"] = {"source": validation.source, "samples": len(validation),
                                  "fit_percent": _validation_fit(result, validation)}

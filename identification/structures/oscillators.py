@@ -408,7 +408,9 @@ def identify_oscillator(data: IdentificationData, *, masses: int, friction: bool
     hold, substeps
         See :class:`OscillatorStructure`.
     **options
-        Passed to the estimator (``max_evaluations``, ``multistart``, ``rng``, ...).
+        Passed to the estimator (``max_evaluations``, ``multistart``, ``rng``, ``global_fit``:
+        :class:`~panto.identification.estimation.global_fit.GlobalFitOptions` for
+        :func:`~panto.identification.estimation.global_fit.fit_global`, ...).
     """
     outputs = tuple(outputs or [o for o in DEFAULT_OUTPUTS if o in data.output_names])
     structure = OscillatorStructure(masses, friction, outputs=outputs, hold=hold, substeps=substeps)
@@ -431,10 +433,10 @@ def identify_oscillator(data: IdentificationData, *, masses: int, friction: bool
         low, high = bounds[name]
         bounds[name] = (min(low, start[name]), max(high, start[name]))
     if method == "lm":
-        from panto.identification.estimation.least_squares import fit_least_squares
+        from panto.identification.estimation.global_fit import fit_from_start
 
-        result = fit_least_squares(structure, data, free=free, initial=start, bounds=bounds,
-                                   executor=executor, progress=progress, **options)
+        result = fit_from_start(structure, data, free=free, initial=start, bounds=bounds,
+                                executor=executor, progress=progress, **options)
     elif method == "nsga2":
         result = _identify_pareto(structure, data, free, start, bounds, executor, progress,
                                   options)

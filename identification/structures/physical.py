@@ -380,10 +380,10 @@ def _identify(structure_type: type, data: IdentificationData, *, executor=None, 
         raise IdentificationError(f"parameter(s) {clash} are both free and fixed")
     data = data.select_outputs(outputs)
     if method == "lm":
-        from panto.identification.estimation.least_squares import fit_least_squares
+        from panto.identification.estimation.global_fit import fit_from_start
 
-        return fit_least_squares(structure, data, free=free, executor=executor,
-                                 progress=progress, **options)
+        return fit_from_start(structure, data, free=free, executor=executor, progress=progress,
+                              **options)
     if method == "nsga2":
         return _identify_pareto(structure, data, free, executor, progress, options)
     raise IdentificationError(f"unknown method {method!r}: 'lm' or 'nsga2'")
@@ -405,7 +405,8 @@ def _identify_pareto(structure, data, free, executor, progress, options) -> Iden
 
 def identify_linear(data: IdentificationData, **options: Any) -> IdentificationResult:
     """Identify :class:`PhysicalLinear` (options: free, fixed, method, outputs, structure_options,
-    and those of :func:`panto.identification.estimation.least_squares.fit_least_squares`)."""
+    and those of :func:`panto.identification.estimation.least_squares.fit_least_squares`;
+    ``global_fit``: :func:`panto.identification.estimation.global_fit.fit_global`'s options)."""
     return _identify(PhysicalLinear, data, **options)
 
 
