@@ -47,7 +47,7 @@ def rig_excitation(duration: float) -> tuple:
     from panto.rig.profile_preview import conditioned_command
     from panto.rig.profiles import load_profile, render_profile
 
-    profile = replace(load_profile(files("rig") / "profiles" / "aprbs_training.json"),
+    profile = replace(load_profile(files("panto.rig") / "profiles" / "aprbs_training.json"),
                       duration=duration)
     rendered = render_profile(profile)
     stream_time, command = conditioned_command(profile)

@@ -55,7 +55,7 @@ def run_rig_campaign(state: dict[str, Any], progress: Progress) -> dict:
     out, settings = state["out"], state["settings"]
     runs = {}
     for label, file, seed in CAMPAIGN:
-        profile = load_profile(files("rig") / "profiles" / file)
+        profile = load_profile(files("panto.rig") / "profiles" / file)
         if settings.run_duration:
             profile = replace(profile, duration=settings.run_duration)
         folder = new_run_folder(out / "runs", prefix=label)  # a rerun never overwrites a run

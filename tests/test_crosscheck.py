@@ -19,7 +19,7 @@ from fmpy import simulate_fmu
 from panto.build_fmu import build_fmu
 from panto.build_fmu.crosscheck import (ImporterRunError, UnknownVariableError, UnsupportedFmuError,
                                   check_fmu_with_toolbox, simulate_in_independent_importer)
-from tests.fixtures.toy_model import (ToyParameters, analytic_equilibrium, analytic_free_response,
+from fixtures.toy_model import (ToyParameters, analytic_equilibrium, analytic_free_response,
                                       make_toy_spec)
 
 STOP_TIME = 0.5

@@ -26,7 +26,7 @@ from fmpy.simulation import instantiate_fmu
 from panto.build_fmu import (CompilationError, build_fmu, derive_instantiation_token,
                        divide_unit_by_time, layout_variables, parse_unit, validate_fmu)
 from panto.build_fmu.compile import COMPILER_FLAGS, find_compiler
-from tests.fixtures.toy_model import (ToyParameters, analytic_equilibrium,
+from fixtures.toy_model import (ToyParameters, analytic_equilibrium,
                                       analytic_free_response, analytic_matrices, make_toy_spec,
                                       make_variable_mass_spec)
 

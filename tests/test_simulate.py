@@ -19,7 +19,7 @@ from scipy import signal
 from panto.build_fmu import build_fmu
 from panto.build_fmu.simulate import (FmuSimulator, PiecewiseLinearInputs, SimulationError,
                                 UnknownVariableError, simulate_fmu_with_inputs)
-from tests.fixtures.toy_model import (ToyParameters, analytic_equilibrium, analytic_matrices,
+from fixtures.toy_model import (ToyParameters, analytic_equilibrium, analytic_matrices,
                                       make_toy_spec)
 
 INTERFACES = ["ME", "CS"]
