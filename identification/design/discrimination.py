@@ -29,15 +29,13 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from pymoo.algorithms.soo.nonconvex.ga import GA
-from pymoo.optimize import minimize
 
 from panto.identification.design.constraints import RigInputConstraints, conventional_inputs
 from panto.identification.design.pantograph import (
     DesignOptions,
     LevelProblem,
-    initial_level_population,
     model_inputs,
+    run_level_ga,
 )
 from panto.identification.design.pantograph_sensitivity import LinearisedPantograph
 
@@ -262,10 +260,7 @@ def design_discrimination(effect: EffectModel,
             progress(f"discrimination DoE: generation {algorithm.n_gen}/{options.generations}, "
                      f"T = {-history[-1]:.6g}")
 
-    algorithm = GA(pop_size=options.population,
-                   sampling=initial_level_population(problem, options), eliminate_duplicates=False)
-    result = minimize(problem, algorithm, ("n_gen", options.generations), seed=options.seed,
-                      verbose=False, callback=callback)
+    result = run_level_ga(problem, options, callback)
     if result.X is None:
         raise ValueError("no design met the contact-force constraint")
     motor, demand = problem.inputs(np.asarray(result.X, float))

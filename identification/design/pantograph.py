@@ -275,6 +275,15 @@ class LevelProblem(Problem):
             out["G"] = force
 
 
+def run_level_ga(problem: Any, options: DesignOptions, callback: Callable[[Any], None]) -> Any:
+    """pymoo's GA over the rig's input levels, from :func:`initial_level_population`, as both the
+    D-optimal and the discrimination designs run it (`callback` sees every generation)."""
+    algorithm = GA(pop_size=options.population,
+                   sampling=initial_level_population(problem, options), eliminate_duplicates=False)
+    return minimize(problem, algorithm, ("n_gen", options.generations), seed=options.seed,
+                    verbose=False, callback=callback)
+
+
 def initial_level_population(problem: LevelProblem, options: DesignOptions) -> np.ndarray:
     """The GA's first population for `problem`.
 
@@ -347,10 +356,7 @@ def design_pantograph_experiment(model: LinearisedPantograph,
             progress(f"pantograph DoE: generation {algorithm.n_gen}/{options.generations}, "
                      f"best cost {history[-1]:.6g}")
 
-    algorithm = GA(pop_size=options.population,
-                   sampling=initial_level_population(problem, options), eliminate_duplicates=False)
-    result = minimize(problem, algorithm, ("n_gen", options.generations), seed=options.seed,
-                      verbose=False, callback=callback)
+    result = run_level_ga(problem, options, callback)
     if result.X is None:
         raise ValueError("no design met the contact-force constraint; lower "
                          "minimum_contact_force or the amplitude range")

@@ -49,7 +49,6 @@ reported with where it lies). No attribution is forced.
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 from dataclasses import dataclass, field
@@ -67,7 +66,7 @@ from panto.identification.diagnosis.support import (NO_GAIN_REASONS, Refit, buil
                                                retuning,
                                                settling_time, systematic_cost, where_summary)
 from panto.identification.diagnosis.effects import EFFECTS, SignalRoles
-from panto.identification.estimation.global_fit import GlobalFitOptions, fit_global
+from panto.identification.estimation.global_fit import GlobalFitOptions, fit_from_start
 from panto.identification.estimation.least_squares import fit_least_squares
 from panto.identification.diagnosis.residual_analysis import (ErrorModelOptions, OutputAnalysis,
                                                              analyse_residuals)
@@ -390,13 +389,8 @@ def fit_nominal(nominal: ModelStructure, free: Sequence[str], train: Identificat
     verdict turns ``unexplained`` (the diagnosis' acceptance must first learn to judge a nominal
     at its global optimum).
     """
-    data = train.select_outputs(_fitted(nominal, train))
-    if global_fit is None:
-        return fit_least_squares(nominal, data, free=free, **options)
-    settings = dataclasses.replace(
-        global_fit, executor=options.pop("executor", global_fit.executor),
-        max_evaluations=int(options.pop("max_evaluations", global_fit.max_evaluations)))
-    return fit_global(nominal, data, free=free, options=settings, **options)
+    return fit_from_start(nominal, train.select_outputs(_fitted(nominal, train)), free=free,
+                          global_fit=global_fit, **options)
 
 
 def _fitted(structure: ModelStructure, data: IdentificationData) -> tuple[str, ...]:
