@@ -51,6 +51,10 @@ from panto.identification.estimation.base import IdentificationError
 
 EFFECTS = ("coulomb_friction", "cubic_stiffness", "dead_zone", "input_delay", "actuator_lag",
            "sensor_inertia", "extra_mode", "contact_loss", "offset", "saturation")
+#: The effects no linear model can express (:attr:`DiagnosisOptions.adequacy` holds them to a
+#: black box's training fit).
+NONLINEAR_EFFECTS = ("coulomb_friction", "cubic_stiffness", "dead_zone", "contact_loss",
+                     "saturation")
 
 Regressor = tuple[np.ndarray, dict]
 """A regressor variant: its samples and its setting (delay, time constant, width...)."""

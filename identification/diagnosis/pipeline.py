@@ -60,14 +60,15 @@ from panto.identification.diagnosis.augmentations import AugmentedStructure, des
 from panto.identification.estimation.base import (IdentificationData, IdentificationError, ModelStructure,
                                  fit_percent)
 from panto.identification.diagnosis.ranking import rank_candidates
-from panto.identification.diagnosis.support import (NO_GAIN_REASONS, Refit, build_structure,
+from panto.identification.diagnosis.support import (IMPROVEMENT_FLOOR, NO_GAIN_REASONS, Refit, build_structure,
                                                default_roles, drift_test,
                                                effective_samples, gap_significance, judge_trial,
                                                retuning,
                                                settling_time, systematic_cost, where_summary)
-from panto.identification.diagnosis.effects import EFFECTS, SignalRoles
+from panto.identification.diagnosis.effects import EFFECTS, NONLINEAR_EFFECTS, SignalRoles
 from panto.identification.estimation.global_fit import GlobalFitOptions, fit_from_start
 from panto.identification.estimation.least_squares import fit_least_squares
+from panto.identification.structures.adequacy import check_adequacy
 from panto.identification.diagnosis.residual_analysis import (ErrorModelOptions, OutputAnalysis,
                                                              analyse_residuals)
 from panto.identification.diagnosis.residual_energy import jsonable
@@ -138,6 +139,9 @@ class Diagnosis:
     analysis_before: tuple[OutputAnalysis, ...] = field(default=(), repr=False)
     analysis_after: tuple[OutputAnalysis, ...] = field(default=(), repr=False)
     series: Mapping[str, np.ndarray] = field(default_factory=dict, repr=False)
+    adequacy: Mapping[str, Any] | None = None
+    """The nominal beside a black box on training (:mod:`~panto.identification.structures.adequacy`),
+    when :attr:`DiagnosisOptions.adequacy` asked for it."""
 
     def gap_closed(self) -> dict[str, float]:
         """Per output: share of the validation residual energy removed by all accepted effects."""
@@ -184,7 +188,7 @@ class Diagnosis:
             "steps": [step.__dict__ for step in self.steps],
             "analysis": [a.to_dict() for a in self.analysis_before],
             "next_experiment": self.next_experiment(),
-            "training_only": self.training_only(),
+            "training_only": self.training_only(), "adequacy": self.adequacy,
             "wall_time": self.wall_time})
 
 
@@ -220,6 +224,15 @@ class DiagnosisOptions:
     defaults, from the data's frequency response and perturbations; its verdict on the global
     optimum goes into the progress and the report's training fit message) instead of one run from
     the defaults. Off by default: see :func:`fit_nominal`."""
+    adequacy: bool = False
+    """Adequacy before anything else: fit a black box of the nominal's order (and two more states)
+    to the training run (:func:`~panto.identification.structures.adequacy.check_adequacy`); when it
+    fits clearly better after a single start, refit the nominal globally (``global_fit`` or the
+    default :class:`GlobalFitOptions`) and check again; a nonlinear candidate
+    (:data:`~panto.identification.diagnosis.effects.NONLINEAR_EFFECTS`) is then accepted only if
+    its training fit beats the black box's on some output by the relevance floor: a nonlinear
+    effect is not named for a difference a linear model explains. Off by default until judged on
+    the independent benchmark families (issue 24)."""
 
     def __post_init__(self) -> None:
         unknown = [c for c in self.candidates if c not in EFFECTS]
@@ -267,6 +280,11 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
         f"and {len(validation)} validation samples, outputs {list(train.output_names)}")
     result = fit_nominal(nominal, free, train, progress=_indent(progress),
                          global_fit=options.global_fit, **fit_options)
+    adequacy = None
+    if options.adequacy:
+        result, adequacy = _adequate_nominal(nominal, free, train, result, options, fit_options,
+                                             progress)
+        say("diagnose: adequacy: " + adequacy.message)
     model = _Model(nominal, dict(result.parameters), tuple(free), dict(result.std),
                    np.asarray(result.covariance, float))
     say("diagnose: nominal fit on training: " + _fits(result.fit))
@@ -274,7 +292,8 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
         say("diagnose: nominal " + result.details["global_fit"]["verdict"])
     before, analysis_before, gap, fit_before = _where(model, validation, roles, say)
     search = _search(model, before, candidates,
-                     _Search(train, validation, roles, options, fit_options, say))
+                     _Search(train, validation, roles, options, fit_options, say,
+                             adequacy.black_box_fit if adequacy else None))
     model, current, rounds, steps, accepted = search
     analysis_after = _analyse(validation, current, model, roles) if steps else analysis_before
     remaining_gap = _gap(model, validation, current, roles) if steps else gap
@@ -290,7 +309,7 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
         where, tuple(rounds), tuple(steps), summary, time.perf_counter() - started,
         tuple(analysis_before), tuple(analysis_after),
         {"time": validation.time, "measured": validation.outputs, "before": before,
-         "after": current})
+         "after": current}, adequacy.to_dict() if adequacy else None)
 
 
 def _check_runs(train: IdentificationData, validation: IdentificationData) -> None:
@@ -333,6 +352,8 @@ class _Search:
     options: DiagnosisOptions
     fit_options: Mapping[str, Any]
     say: Progress
+    linear_level: Mapping[str, float] | None = None
+    """Training fit of the best black box (:attr:`DiagnosisOptions.adequacy`), or None."""
 
 
 def _search(model: _Model, before: np.ndarray, candidates: Sequence[str], search: _Search):
@@ -482,11 +503,43 @@ def _try(model: _Model, candidate: Mapping[str, Any], current: np.ndarray,
         trial = Trial(effect, candidate["variant"], candidate["err"], effect, {}, {}, math.nan,
                       math.nan, math.nan, (), math.nan, {}, {}, False, (stage,), str(error))
         return trial, model, current
-    trial = Trial(**{**trial, "description": describe_augmentation(structure)})
+    trial = Trial(**{**trial, "description": describe_augmentation(structure),
+                     **_linear_explains(effect, trial, search.linear_level)})
     say(f"  {effect}: dBIC {trial.delta_bic:.1f}, |theta|/sigma {trial.significance:.1f}, "
         f"validation +{trial.improvement:.2f} points (fold spread {trial.fold_spread:.2f}): "
         + ("accepted" if trial.accepted else "rejected (" + ", ".join(trial.failed) + ")"))
     return trial, new, simulated
+
+
+def _linear_explains(effect: str, trial: Mapping[str, Any],
+                     level: Mapping[str, float] | None) -> dict[str, Any]:
+    """The trial's verdict fields, failed when a nonlinear effect does not fit training better than
+    the black box does on any output by the relevance floor (:attr:`DiagnosisOptions.adequacy`)."""
+    if level is None or effect not in NONLINEAR_EFFECTS:
+        return {}
+    gains = {o: trial["fit_train"].get(o, math.nan) - level[o] for o in level}
+    if any(g > IMPROVEMENT_FLOOR for g in gains.values()):
+        return {}
+    reason = ("a linear black box fits training as well (" +
+              ", ".join(f"{o} {g:+.2f} points" for o, g in gains.items()) +
+              "): not named for a linear difference")
+    return {"accepted": False, "failed": tuple(trial["failed"]) + (reason,)}
+
+
+def _adequate_nominal(nominal: ModelStructure, free: Sequence[str], train: IdentificationData,
+                      result: Any, options: DiagnosisOptions, fit_options: Mapping[str, Any],
+                      progress: Progress | None) -> tuple[Any, Any]:
+    """The nominal's fit and its adequacy; refitted globally when a black box shows that a single
+    start did not converge (:attr:`DiagnosisOptions.adequacy`)."""
+    data = train.select_outputs(_fitted(nominal, train))
+    adequacy = check_adequacy(nominal, result, data, progress=_indent(progress))
+    if adequacy.verdict != "not converged":
+        return result, adequacy
+    if progress:
+        progress("diagnose: adequacy: " + adequacy.message + "; refitting the nominal globally")
+    result = fit_nominal(nominal, free, train, progress=_indent(progress),
+                         global_fit=options.global_fit or GlobalFitOptions(), **fit_options)
+    return result, check_adequacy(nominal, result, data, reference=adequacy)
 
 
 def _predicted_contact_loss(top: Sequence[Mapping[str, Any]], remaining: Sequence[str],

@@ -87,7 +87,7 @@ class FrequencyFitOptions:
 
     screening: int = 256
     """Sobol points (in the transformed bounds) whose frequency-response cost is evaluated."""
-    starts: int = 3
+    starts: int = 16
     """Best distinct screening points polished by ``scipy.optimize.least_squares``."""
     candidates: int = 3
     """Distinct candidates returned at most."""
