@@ -7,7 +7,7 @@ import pytest
 from panto.fmu_src.models import default_parameters
 from panto.identification.structures.plots import plot_eigenvalue_sensitivity
 from panto.identification.structures.sensitivity import (TABLE_4_1, eigenvalue_sensitivity, linearised_eigenvalues,
-                                        match_modes)
+                                        match_modes, elastic_rod_modes)
 
 MASSES = ("m1", "m2", "m3", "m4", "m_c")
 DAMPERS = ("c1", "c2", "c3", "c_c")
@@ -72,6 +72,23 @@ def test_head_parameters_are_among_the_most_influential_as_in_the_thesis(table_4
     assert len(table_4_1.shifts) == len(TABLE_4_1) == 13
     # Thesis: robust to +-10 %: no eigenvalue moves by more than ~10 %.
     assert max(s.relative_shift for s in table_4_1.shifts) < 0.1
+
+
+def test_m4_leads_only_through_the_rod_mode_and_m_c_k_ph_lead_the_others_as_in_the_thesis(
+        table_4_1, defaults):
+    # Fig. 4.9 (docs/thesis.md): the rod-elastic mode (spring k on delta) becomes infinitely fast
+    # as the rod is made rigid, omega ~ sqrt(k): k x100 -> x10, k x10^4 -> x100 (asymptotically).
+    rod = elastic_rod_modes()
+    assert len(rod) == 2 and table_4_1.nominal[rod[0]] == pytest.approx(
+        np.conj(table_4_1.nominal[rod[1]]))
+    stiff = {f: np.abs(match_modes(table_4_1.nominal, linearised_eigenvalues(
+        {"k": defaults["k"] * f}, 2.0, 4.0))[rod[0]]) for f in (100.0, 1e4)}
+    assert stiff[1e4] / stiff[100.0] == pytest.approx(10.0, rel=0.02)
+    # m4 heads the all-mode ranking because it heads the rod mode's ranking; without the rod
+    # mode the collector-head mass and the contact stiffness lead, as the thesis says.
+    others = [i for i in range(len(table_4_1.nominal)) if i not in rod]
+    assert table_4_1.ranking[0] == table_4_1.ranking_over(rod)[0] == "m4"
+    assert set(table_4_1.ranking_over(others)[:2]) == {"m_c", "k_ph"}
 
 
 def test_identified_parameters_are_varied_about_and_results_are_written(tmp_path, defaults):
