@@ -15,7 +15,7 @@ from panto.identification.estimation.base import IdentificationData, fit_percent
 from panto.identification.estimation.global_fit import GlobalFitOptions, fit_global
 from panto.identification.estimation.least_squares import fit_least_squares
 from panto.identification.structures.adequacy import check_adequacy, state_order
-from panto.identification.structures.oscillators import OscillatorStructure
+from panto.identification.structures.oscillators import OscillatorStructure, identify_oscillator
 from test_global_fit import F_0, TRUTH, Y_0, _inputs, _three_mass
 
 QUICK = GlobalFitOptions(data_starts=1, perturbations=1)
@@ -47,7 +47,10 @@ def test_a_stuck_start_is_not_converged_and_the_global_fit_is_adequate(train):
     assert first.verdict == "not converged" and first.clearly_better
     assert first.black_box_fit["F_c"] > floor - 0.3  # the black box reaches the floor itself
     assert first.p_value < 0.01 and "no nonlinear effect" in first.message
-    best = fit_global(structure, train, free=structure.default_free(), options=QUICK)
+    best = identify_oscillator(train, masses=3, friction=False, outputs=("F_c",),
+                               global_fit=QUICK, adequacy=True)  # `panto identify --initial data`
+    assert best.details["adequacy"]["verdict"] == "adequate", best.message
+    assert "adequacy: nominal vs black box" in best.message
     second = check_adequacy(structure, best, train, reference=first)
     assert second.black_box is first.black_box  # reused, not refitted
     assert second.verdict == "adequate", second.message

@@ -106,6 +106,8 @@ def result_summary(result: IdentificationResult, *, data: IdentificationData,
     }
     if "global_fit" in result.details:  # fit_global's verdict and its starts
         summary["global_fit"] = result.details["global_fit"]
+    if "adequacy" in result.details:  # the nominal beside a black box of its order
+        summary["adequacy"] = result.details["adequacy"]
     if validation is not None:
         summary["validation"] = {"source": validation.source, "samples": len(validation),
                                  "fit_percent": _validation_fit(result, validation)}
@@ -137,6 +139,9 @@ def markdown_summary(result: IdentificationResult, summary: Mapping[str, Any]) -
     if validation and "error" not in validation:
         parts.append("Fit on validation: " + ", ".join(f"{k} {v:.2f} %"
                                                         for k, v in validation.items()))
+    adequacy = result.details.get("adequacy")
+    if adequacy:
+        parts.append(f"Adequacy ({adequacy['verdict']}): {adequacy['message']}")
     parts += ["", parameter_table(result) if result.estimates else "(no per-parameter estimates)"]
     notes = [f"- {n}: {e.status if e.fixed or e.at_bound else e.verdict}: {e.reason}"
              for n, e in result.estimates.items()

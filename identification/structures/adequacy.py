@@ -31,6 +31,7 @@ Verdicts
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping, Sequence
@@ -169,6 +170,22 @@ def check_adequacy(structure: ModelStructure, result: IdentificationResult,
                     best)
 
 
+def with_adequacy(structure: ModelStructure, result: IdentificationResult,
+                  data: IdentificationData, *, progress: Progress | None = None
+                  ) -> IdentificationResult:
+    """`result` with its :func:`check_adequacy` in ``details["adequacy"]`` and the message.
+
+    After a global fit, an adequate nominal's fit is at the optimum in cost even when fewer than
+    two starts agreed (the message says so)."""
+    adequacy = check_adequacy(structure, result, data, progress=progress)
+    text = f"adequacy: {adequacy.message}"
+    report = result.details.get("global_fit")
+    if report is not None and adequacy.verdict == "adequate" and not report["global_optimum"]:
+        text += "; so the global optimum in cost is reached although the starts did not show it"
+    return dataclasses.replace(result, message=f"{result.message}; {text}",
+                               details={**result.details, "adequacy": adequacy.to_dict()})
+
+
 def _residual(fit: Mapping[str, float]) -> float:
     return sum((1.0 - f / 100.0) ** 2 if math.isfinite(f) else math.inf for f in fit.values())
 
@@ -208,4 +225,4 @@ def _plain(value: float) -> float | None:
     return float(value) if math.isfinite(value) else None
 
 
-__all__ = ["Adequacy", "check_adequacy", "state_order", "RELEVANCE_FLOOR", "SIGNIFICANCE"]
+__all__ = ["Adequacy", "check_adequacy", "with_adequacy", "state_order", "RELEVANCE_FLOOR", "SIGNIFICANCE"]

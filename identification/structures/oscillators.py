@@ -410,7 +410,8 @@ def identify_oscillator(data: IdentificationData, *, masses: int, friction: bool
     **options
         Passed to the estimator (``max_evaluations``, ``multistart``, ``rng``, ``global_fit``:
         :class:`~panto.identification.estimation.global_fit.GlobalFitOptions` for
-        :func:`~panto.identification.estimation.global_fit.fit_global`, ...).
+        :func:`~panto.identification.estimation.global_fit.fit_global`, ...); ``adequacy=True``
+        adds :func:`~panto.identification.structures.adequacy.with_adequacy` (``"lm"`` only).
     """
     outputs = tuple(outputs or [o for o in DEFAULT_OUTPUTS if o in data.output_names])
     structure = OscillatorStructure(masses, friction, outputs=outputs, hold=hold, substeps=substeps)
@@ -432,11 +433,16 @@ def identify_oscillator(data: IdentificationData, *, masses: int, friction: bool
     for name in wanted:  # widen a bound the static start falls outside of
         low, high = bounds[name]
         bounds[name] = (min(low, start[name]), max(high, start[name]))
+    adequacy = bool(options.pop("adequacy", False))
     if method == "lm":
         from panto.identification.estimation.global_fit import fit_from_start
 
         result = fit_from_start(structure, data, free=free, initial=start, bounds=bounds,
                                 executor=executor, progress=progress, **options)
+        if adequacy:
+            from panto.identification.structures.adequacy import with_adequacy
+
+            result = with_adequacy(structure, result, data, progress=progress)
     elif method == "nsga2":
         result = _identify_pareto(structure, data, free, start, bounds, executor, progress,
                                   options)

@@ -379,11 +379,17 @@ def _identify(structure_type: type, data: IdentificationData, *, executor=None, 
     if clash:
         raise IdentificationError(f"parameter(s) {clash} are both free and fixed")
     data = data.select_outputs(outputs)
+    adequacy = bool(options.pop("adequacy", False))
     if method == "lm":
         from panto.identification.estimation.global_fit import fit_from_start
 
-        return fit_from_start(structure, data, free=free, executor=executor, progress=progress,
-                              **options)
+        result = fit_from_start(structure, data, free=free, executor=executor, progress=progress,
+                                **options)
+        if adequacy:
+            from panto.identification.structures.adequacy import with_adequacy
+
+            result = with_adequacy(structure, result, data, progress=progress)
+        return result
     if method == "nsga2":
         return _identify_pareto(structure, data, free, executor, progress, options)
     raise IdentificationError(f"unknown method {method!r}: 'lm' or 'nsga2'")
@@ -406,7 +412,8 @@ def _identify_pareto(structure, data, free, executor, progress, options) -> Iden
 def identify_linear(data: IdentificationData, **options: Any) -> IdentificationResult:
     """Identify :class:`PhysicalLinear` (options: free, fixed, method, outputs, structure_options,
     and those of :func:`panto.identification.estimation.least_squares.fit_least_squares`;
-    ``global_fit``: :func:`panto.identification.estimation.global_fit.fit_global`'s options)."""
+    ``global_fit``: :func:`panto.identification.estimation.global_fit.fit_global`'s options;
+    ``adequacy=True``: :func:`panto.identification.structures.adequacy.with_adequacy`)."""
     return _identify(PhysicalLinear, data, **options)
 
 
