@@ -14,4 +14,5 @@ __all__, __getattr__, __dir__ = lazy_exports(__name__, {
     "DesignOptions": "pantograph",
     "write_design_profile": "profiles",
     "design_discrimination": "discrimination",
+    "closed_loop_experiment": "closed_loop",
 })
