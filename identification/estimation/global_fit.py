@@ -13,6 +13,9 @@ points and compares where they end:
    of its estimate (at most ``perturbation_cap``): a lightly damped mode leaves a valley in the
    output-error cost narrower than its damping ratio, so fixed-size perturbations (tried: 5 %
    and 10 % on the three-mass plant of ``tests/test_global_fit.py``) mostly land outside it.
+4. when the best of these stopped on its (short) budget, it is continued to convergence
+   (``polish_evaluations``; measured on the held-out recovery benchmark: physical-linear starts
+   ended "not converged" after 400 simulations and 0.2-0.5 % above the optimum's cost).
 
 The result is the best run, with a verdict in ``message`` and ``details["global_fit"]``: how
 many starts reached the best cost within ``cost_tolerance`` and whether their free parameters
@@ -116,6 +119,9 @@ class GlobalFitOptions:
     """Largest standard deviation of a perturbation in transformed parameters (0.2: 20 %)."""
     max_evaluations: int = 400
     """Model simulations per time-domain start."""
+    polish_evaluations: int = 2000
+    """When the best start stopped on its budget (not converged), it is continued with this many
+    more simulations (origin "polish", not counted as an independent start); 0: never."""
     cost_tolerance: float = 1e-3
     """A start reaches the best cost when its cost is within this fraction of it."""
     parameter_tolerance: float = 0.05
@@ -339,6 +345,10 @@ def fit_global(structure: ModelStructure, data: IdentificationData, *, free: Seq
         z = np.clip(z_best + spread * rng.normal(size=len(z_best)), lower, upper)
         runs.append(run(f"perturbation {k + 1}", problem.parameters(z)))
         say(f"{structure.name}: perturbation {k + 1}: {_fits(runs[-1][1])}")
+    best = min((r for _, r, _ in runs), key=_cost)
+    if not best.success and options.polish_evaluations > 0 and math.isfinite(_cost(best)):
+        runs.append(run("polish", best.parameters, budget=options.polish_evaluations))
+        say(f"{structure.name}: the best start continued: {_fits(runs[-1][1])}")
     return _verdict(runs, free, options, note, bla, started)
 
 
@@ -378,8 +388,8 @@ class _Runner:
         self.structure, self.data, self.free, self.bounds = structure, data, free, bounds
         self.initial, self.options, self.extra = dict(initial or {}), options, dict(least_squares)
 
-    def __call__(self, origin: str, start: Mapping[str, float], offsets: Sequence[str] = ()
-                 ) -> tuple[str, IdentificationResult, str]:
+    def __call__(self, origin: str, start: Mapping[str, float], offsets: Sequence[str] = (),
+                 budget: int | None = None) -> tuple[str, IdentificationResult, str]:
         limits = {**self.structure.bounds(), **dict(self.bounds or {})}
         start = {**self.initial, **dict(start)}
         start.update({n: min(max(start[n], limits[n][0]), limits[n][1])  # rounding in z
@@ -396,7 +406,8 @@ class _Runner:
                 if all(math.isfinite(v) for v in first.fit.values()) else start
         result = fit_least_squares(self.structure, self.data, free=self.free, initial=start,
                                    bounds=self.bounds, executor=self.options.executor,
-                                   max_evaluations=self.options.max_evaluations, **self.extra)
+                                   max_evaluations=budget or self.options.max_evaluations,
+                                   **self.extra)
         return origin, dataclasses.replace(
             result, n_evaluations=result.n_evaluations + evaluations), ""
 
@@ -452,7 +463,8 @@ def _verdict(runs: list[tuple[str, IdentificationResult, str]], free: Sequence[s
                        "agrees": bool(reached and not apart)})
     n = len(runs)
     reached = sum(s["reached_best_cost"] for s in starts)
-    independent = sum(s["agrees"] for s in starts if not s["origin"].startswith("perturbation"))
+    independent = sum(s["agrees"] for s in starts
+                      if not s["origin"].startswith(("perturbation", "polish")))
     if disagreeing:
         verdict = "global optimum not shown: best starts disagree on " + \
             ", ".join(name for name in free if name in disagreeing)
