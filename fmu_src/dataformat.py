@@ -138,6 +138,27 @@ def data_suffix(path: str | Path, what: str = "dataset",
     return suffix
 
 
+#: The first bytes of the binary formats a CSV may turn out to be, and their names.
+_MAGIC = ((b"PAR1", "a Parquet file (suffix .parquet)"), (b"MATLAB", "a MATLAB file (suffix .mat)"),
+          (b"\x89HDF", "an HDF5 file (suffix .h5)"), (b"PK\x03\x04", "a zip archive"))
+
+
+def read_text_file(path: str | Path, what: str = "CSV") -> str:
+    """The text of `path` (UTF-8), or a :class:`DataFormatError` naming the file and, for a
+    binary file under a text suffix (a Parquet file named ``.csv``), what it really is."""
+    path = Path(path)
+    try:
+        return path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as error:
+        with open(path, "rb") as stream:
+            head = stream.read(8)
+        found = next((name for magic, name in _MAGIC if head.startswith(magic)), None)
+        raise DataFormatError(f"{path}: not a text {what} file: "
+                              + (f"it is {found}" if found else f"byte {error.start} is not UTF-8")
+                              ) from None
+
+
 __all__ = ["TIME_NAME", "TIME_UNIT", "DATA_SUFFIXES", "TABLE_SUFFIXES", "DataFormatError",
            "format_header", "parse_header", "csv_header", "format_csv_row", "csv_read_options",
-           "json_default", "metadata_path_for", "write_side_file", "read_side_file", "data_suffix"]
+           "json_default", "metadata_path_for", "write_side_file", "read_side_file", "data_suffix",
+           "read_text_file"]

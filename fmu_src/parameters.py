@@ -8,6 +8,9 @@ A parameter file is a JSON object a person can read and edit::
 
 Only ``value`` is required per entry; parameters left out keep their defaults. Values outside the
 admissible range are refused with an error naming the file, the parameter, the value and the range.
+A ``unit`` other than the model's is converted when it is a plain multiple of it (``g`` for
+``kg``, ``mm`` for ``m``, ``deg`` for ``rad``, ``kN/m`` for ``N/m``: :data:`UNIT_CONVERSIONS`)
+and refused otherwise, never ignored.
 """
 from __future__ import annotations
 
@@ -25,6 +28,33 @@ from panto.fmu_src.spec import ParameterSpec
 
 class ParameterError(ValueError):
     """A parameter value or parameter file is not admissible."""
+
+
+#: Units a parameter file may use instead of the model's: unit -> (model's unit, factor to it).
+UNIT_CONVERSIONS: Mapping[str, tuple[str, float]] = MappingProxyType({
+    "g": ("kg", 1e-3), "mm": ("m", 1e-3), "cm": ("m", 1e-2), "deg": ("rad", math.pi / 180.0),
+    "kN": ("N", 1e3), "kN/m": ("N/m", 1e3), "N/mm": ("N/m", 1e3), "kN.s/m": ("N.s/m", 1e3)})
+
+
+def _unit_key(unit: str) -> str:
+    """One spelling of a unit: ``"N m"``, ``"N*m"`` and ``"N·m"`` are ``"N.m"``; ``^`` dropped."""
+    key = ".".join(unit.split())
+    for mark in ("*", "\u00b7"):
+        key = key.replace(mark, ".")
+    return key.replace("^", "")
+
+
+def _in_model_unit(value: float, unit: object, spec: ParameterSpec, path: Path) -> float:
+    """`value` given in `unit`, in the model's unit of `spec` (converted or refused)."""
+    if unit is None or _unit_key(str(unit)) == _unit_key(spec.unit):
+        return value
+    target, factor = UNIT_CONVERSIONS.get(_unit_key(str(unit)), (None, 1.0))
+    if target is not None and _unit_key(target) == _unit_key(spec.unit):
+        return value * factor
+    convertible = sorted(u for u, (t, _) in UNIT_CONVERSIONS.items() if t == spec.unit)
+    raise ParameterError(f"{path}: parameter {spec.name!r} is given in {unit!r}; its unit is "
+                         f"{spec.unit!r}" + (f" (or {', '.join(convertible)})" if convertible
+                                             else ""))
 
 
 @dataclass(frozen=True)
@@ -124,12 +154,14 @@ class ParameterSet:
             raise ParameterError(f"{path}: expected an object with a 'parameters' object")
         if data.get("model", model) != model:
             raise ParameterError(f"{path}: parameters are for model {data['model']!r}, not {model!r}")
-        values = {}
+        values, known = {}, {s.name: s for s in specs}
         for name, entry in data["parameters"].items():
             value = entry.get("value") if isinstance(entry, dict) else entry
             if not isinstance(value, (int, float)):  # JSON true/false count as 1/0
                 raise ParameterError(f"{path}: parameter {name!r} has no numeric 'value' ({entry!r})")
             values[name] = float(value)
+            if name in known and isinstance(entry, dict):
+                values[name] = _in_model_unit(values[name], entry.get("unit"), known[name], path)
         return cls(model, specs, values, source=str(path))
 
 

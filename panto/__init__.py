@@ -11,7 +11,14 @@ Everything installs under this one name (``docs/architecture.md``): ``panto.fmu_
 from __future__ import annotations
 
 from importlib import import_module
+from importlib.metadata import PackageNotFoundError, version
 from typing import Any, Callable, Mapping
+
+try:
+    #: The installed distribution's version (package metadata, from ``pyproject.toml``).
+    __version__ = version("panto")
+except PackageNotFoundError:  # running from a source tree that was never installed
+    __version__ = "0+unknown"
 
 
 def lazy_exports(package: str, table: Mapping[str, str]

@@ -1,15 +1,34 @@
-"""``panto``: the command-line interface. Each subcommand is one small function in a table."""
+"""``panto``: the command-line interface. Each subcommand is one small function in a table.
+
+:func:`main` parses, checks the paths it is given (an FMU that is no FMU, an output that cannot
+be written) before any work, runs the subcommand and turns its end into an exit code
+(:data:`EXIT_CODES`): bad input is one line on standard error naming the culprit, never a
+traceback; Ctrl-C keeps what was recorded and says so in one line; a closed pipe ends quietly.
+"""
 from __future__ import annotations
 
 import argparse
 import importlib
 import json
 import logging
+import os
 import sys
+import traceback
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterator
 
-from panto.console import say
+from panto.console import progress, say, set_verbosity
+from panto.data_options import non_negative_float
+
+#: Exit codes of every ``panto`` command (shown by ``panto --help``).
+EXIT_CODES = {0: "success",
+              1: "the command ran, and its result is negative (a fit that failed, a check "
+                 "outside its limits, aliasing suspected)",
+              2: "usage error or bad input (an option, a file, a column, a value): one line "
+                 "names it",
+              3: "internal error (a bug: run with -v for the traceback and report it)",
+              4: "aborted (Ctrl-C); what was recorded so far is kept",
+              141: "standard output closed early (e.g. piped into head): ends quietly"}
 
 
 def run_build_fmu(args: argparse.Namespace) -> int:
@@ -17,7 +36,7 @@ def run_build_fmu(args: argparse.Namespace) -> int:
     from panto.build_fmu.project import build_project_fmus
 
     built = build_project_fmus(args.out, names=args.models or _all_fmus(),
-                               fmi_versions=args.fmi_version, progress=say)
+                               fmi_versions=args.fmi_version, progress=progress)
     failed = [b for b in built if b.problems]
     for b in failed:
         say(f"INVALID {b.path}: " + "; ".join(b.problems))
@@ -67,34 +86,79 @@ def run_demo(args: argparse.Namespace) -> int:
     """The main job on the embedded defaults."""
     from panto.demo import run_demo as demo
 
-    demo(Path(args.out), quick=args.quick, progress=say)
+    demo(Path(args.out), quick=args.quick, progress=progress)
     return 0
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line on standard error (exit code 2)."""
+
+    def error(self, message: str):
+        """Print ``<prog>: error: <message> (see <prog> --help)`` and exit with code 2."""
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def _version() -> str:
+    from panto import __version__
+
+    return __version__
+
+
+def _epilog() -> str:
+    return "exit codes:\n" + "\n".join(f"  {code:>3}  {text}" for code, text in EXIT_CODES.items())
+
+
+def _add_verbosity(parser: argparse.ArgumentParser, *, top: bool) -> None:
+    """``-v``/``-q`` on `parser`; on a subcommand they default to 'not given' (the top's)."""
+    default = {} if top else {"default": argparse.SUPPRESS}
+    parser.add_argument("-v", "--verbose", action="store_true", **default,
+                        help="log details (and show the traceback of an internal error)")
+    parser.add_argument("-q", "--quiet", action="store_true", **default,
+                        help="print only results and errors, no progress lines")
+
+
+def walk_parsers(parser: argparse.ArgumentParser) -> Iterator[argparse.ArgumentParser]:
+    """`parser` and every subcommand parser below it, depth first."""
+    yield parser
+    for action in parser._actions:  # argparse keeps its subparsers there (no public accessor)
+        if isinstance(action, argparse._SubParsersAction):
+            for child in dict.fromkeys(action.choices.values()):
+                yield from walk_parsers(child)
+
+
 def _parser() -> tuple[argparse.ArgumentParser, dict[str, Callable]]:
-    parser = argparse.ArgumentParser(prog="panto", description=__doc__)
-    parser.add_argument("-v", "--verbose", action="store_true", help="log details")
-    sub = parser.add_subparsers(dest="command", required=True)
+    parser = _Parser(prog="panto", description=__doc__.split("\n")[0], epilog=_epilog(),
+                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--version", action="version", version=f"panto {_version()}",
+                        help="print the version and exit")
+    _add_verbosity(parser, top=True)
+    sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser,
+                                help="the subcommand; 'panto COMMAND --help' for its options")
     handlers: dict[str, Callable] = {}
 
     def add(name: str, handler: Callable, help_text: str) -> argparse.ArgumentParser:
         handlers[name] = handler
-        return sub.add_parser(name, help=help_text, description=help_text)
+        return sub.add_parser(name, help=help_text, description=help_text,
+                              epilog="exit codes: see panto --help")
 
     p = add("build-fmu", run_build_fmu, "generate, compile, package and validate the FMUs")
     p.add_argument("--out", default="fmus", help="output folder (default: fmus)")
     p.add_argument("--models", nargs="*", help="subset, e.g. Pantograph TwoMass")
-    p.add_argument("--fmi-version", type=int, nargs="+", choices=(2, 3), default=[2, 3])
+    p.add_argument("--fmi-version", type=int, nargs="+", choices=(2, 3), default=[2, 3],
+                   help="FMI versions to build (default: 2 3)")
 
     p = add("linearise", run_linearise, "equilibrium, eigenvalues and A, B, C, D at (eta, p)")
-    p.add_argument("--model", default="Pantograph", choices=("Pantograph", "TwoMass", "ThreeMass"))
+    p.add_argument("--model", default="Pantograph", choices=("Pantograph", "TwoMass", "ThreeMass"),
+                   help="model (default Pantograph)")
     p.add_argument("--eta", type=float, default=2.0, help="wire height [m]")
-    p.add_argument("--p", type=float, default=4.0, help="bellow pressure [bar]")
+    p.add_argument("--p", type=non_negative_float, default=4.0,
+                   help="bellow pressure [bar] (>= 0)")
     p.add_argument("--parameters", help="parameter file (JSON)")
     p.add_argument("--json", help="also write the result as JSON")
 
     p = add("parameters", run_parameters, "write a model's default parameter file")
-    p.add_argument("--model", default="Pantograph", choices=("Pantograph", "TwoMass", "ThreeMass"))
+    p.add_argument("--model", default="Pantograph", choices=("Pantograph", "TwoMass", "ThreeMass"),
+                   help="model (default Pantograph)")
     p.add_argument("--out", required=True, help="JSON file to write")
 
     p = add("demo", run_demo, "the main job: FMUs, rig campaign, video, identification, "
@@ -104,6 +168,8 @@ def _parser() -> tuple[argparse.ArgumentParser, dict[str, Callable]]:
 
     for module in _COMMAND_MODULES:
         importlib.import_module(module).register(add)
+    for child in list(walk_parsers(parser))[1:]:
+        _add_verbosity(child, top=False)
     return parser, handlers
 
 
@@ -116,16 +182,98 @@ _COMMAND_MODULES = ("panto.commands_cosim", "panto.commands_rig", "panto.command
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``panto`` console script."""
+    """Entry point of the ``panto`` console script: the exit code (:data:`EXIT_CODES`)."""
     parser, handlers = _parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as done:  # --help, --version, a usage error
+        return done.code if isinstance(done.code, int) else 2
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")
+    set_verbosity(quiet=args.quiet)
     try:
-        return handlers[args.command](args)
-    except (ValueError, OSError, RuntimeError) as error:
-        print(f"panto {args.command}: error: {error}", file=sys.stderr)
+        return _run(args, handlers[args.command])
+    finally:
+        set_verbosity(quiet=False)
+
+
+def _run(args: argparse.Namespace, handler: Callable[[argparse.Namespace], int]) -> int:
+    """Check the paths, run `handler`, and map how it ended to an exit code."""
+    name = " ".join(filter(None, (args.command, getattr(args, "rig_command", None),
+                                  getattr(args, "video_command", None))))
+    try:
+        _check_paths(args)
+        code = handler(args)
+        sys.stdout.flush()
+        return code
+    except BrokenPipeError:  # the reader of standard output went away (| head): end quietly
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 141
+    except (ValueError, OSError, RuntimeError, LookupError) as error:
+        return _fail(name, str(error), 2)
+    except KeyboardInterrupt:
+        return _fail(name, "aborted (Ctrl-C); what was written so far is kept", 4, "")
+    except SystemExit as done:
+        if isinstance(done.code, str):  # a command refusing its input in words
+            _fail(name, done.code, 2)
+            raise _Refused(done.code) from None
+        raise
+    except Exception as error:  # a bug: one line; the traceback with -v
+        if args.verbose:
+            traceback.print_exc()
+        return _fail(name, f"internal error: {type(error).__name__}: {error} (run with -v for "
+                           "the traceback)", 3)
+
+
+class _Refused(SystemExit):
+    """A command's refusal (:class:`SystemExit` with a message) once reported: exit code 2."""
+
+    @property
+    def code(self) -> int:
+        """Exit code 2 (bad input); the message is in ``args``."""
         return 2
+
+
+def _fail(name: str, message: str, code: int, label: str = "error: ") -> int:
+    """Report `message` in one line on standard error; return `code`."""
+    print(f"panto {name}: {label}{' '.join(message.split())}", file=sys.stderr, flush=True)
+    return code
+
+
+def _check_paths(args: argparse.Namespace) -> None:
+    """Before any work: an ``--fmu`` must be an FMU, outputs must be writable."""
+    fmu = getattr(args, "fmu", None)
+    if fmu:
+        _check_fmu(Path(fmu))
+    for flag in ("out", "json", "plot", "picture"):
+        value = getattr(args, flag, None)
+        if isinstance(value, str) and value != "-":
+            _check_writable(Path(value), f"--{flag}")
+
+
+def _check_fmu(path: Path) -> None:
+    import zipfile
+
+    if not path.is_file():
+        raise ValueError(f"--fmu {path}: no such file")
+    if not zipfile.is_zipfile(path):
+        raise ValueError(f"--fmu {path}: not an FMU (an FMU is a zip archive with "
+                         "modelDescription.xml)")
+    with zipfile.ZipFile(path) as archive:
+        if "modelDescription.xml" not in archive.namelist():
+            raise ValueError(f"--fmu {path}: not an FMU (no modelDescription.xml in the archive)")
+
+
+def _check_writable(path: Path, flag: str) -> None:
+    """`path` can be created or written: its nearest existing ancestor is a writable folder."""
+    existing = path
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if existing != path and not existing.is_dir():
+        raise ValueError(f"{flag} {path}: cannot be created, {existing} is a file, not a folder")
+    folder = existing if existing.is_dir() else existing.parent
+    if not os.access(folder, os.W_OK | os.X_OK):
+        raise ValueError(f"{flag} {path}: cannot be written, no permission in {folder}")
 
 
 if __name__ == "__main__":

@@ -18,8 +18,9 @@ from contextlib import nullcontext
 from pathlib import Path
 from typing import Callable
 
-from panto.console import say
-from panto.data_options import add_data_options, load_data
+from panto.console import progress, say
+from panto.data_options import (add_data_options, load_data, non_negative_float, positive_float,
+                                positive_int)
 
 
 def run_compare(args: argparse.Namespace) -> int:
@@ -37,7 +38,7 @@ def run_compare(args: argparse.Namespace) -> int:
     with pool as executor:
         table = compare_structures(train, validation,
                                    structures=comparison_identifiers(args.structures or None),
-                                   executor=executor, progress=say)
+                                   executor=executor, progress=progress)
     say(table.to_markdown())
     if args.out:
         folder = Path(args.out)
@@ -104,7 +105,7 @@ def register(add: Callable) -> None:
     p.add_argument("validation", help="validation run folder or table (ramps)")
     p.add_argument("--structures", nargs="+", help="structure names (default: all in the "
                    "comparison, e.g. physical-linear three-mass blackbox-4)")
-    p.add_argument("--workers", type=int, default=1,
+    p.add_argument("--workers", type=positive_int, default=1,
                    help="processes evaluating populations / Jacobians in parallel (default 1)")
     add_data_options(p)
     p.add_argument("--out", help="folder for the table (md, csv, json), plots, parameter files")
@@ -114,9 +115,9 @@ def register(add: Callable) -> None:
             "each parameter scaled by 0.9 and 1.1, ranked by influence (thesis Fig. 4.9)")
     p.add_argument("--parameters", help="parameter file (JSON), e.g. an identified set")
     p.add_argument("--eta", type=float, default=2.0, help="wire height [m] (2.0)")
-    p.add_argument("--p", type=float, default=4.0, help="bellow pressure [bar] (4.0)")
+    p.add_argument("--p", type=non_negative_float, default=4.0, help="bellow pressure [bar] (4.0)")
     p.add_argument("--names", nargs="+", help="parameters to scale (default Table 4.1's 13)")
-    p.add_argument("--factors", type=float, nargs="+", default=[0.9, 1.1],
+    p.add_argument("--factors", type=positive_float, nargs="+", default=[0.9, 1.1],
                    help="multipliers (default 0.9 1.1)")
     p.add_argument("--out", help="PNG: complex plane and ranking")
     p.add_argument("--json", help="write the eigenvalues and ranking as JSON")

@@ -17,7 +17,8 @@ import json
 from pathlib import Path
 from typing import Callable
 
-from panto.console import say
+from panto.console import progress, say
+from panto.data_options import non_negative_float, positive_float, positive_int
 
 
 def _setup(args: argparse.Namespace):
@@ -52,7 +53,7 @@ def run_cosim(args: argparse.Namespace) -> int:
         path = make_rig_sequence(args.rig_sequence, line=args.line or "thesis-60m",
                                  speed_kmh=args.speed or 300.0,
                                  pantograph=_setup(args) if args.pantograph or args.fmu
-                                 else None, fmu_cache=args.fmu_cache, progress=say)
+                                 else None, fmu_cache=args.fmu_cache, progress=progress)
         say(f"wrote {path} and {path.name}.json")
         return 0
     if args.validate_en50318:
@@ -68,7 +69,7 @@ def _validate(args: argparse.Namespace) -> int:
     report = validate_en50318(args.out, time_step=args.time_step,
                               element_length=args.element_length or 0.25,
                               with_sensitivity=not args.no_sensitivity,
-                              fmu_cache=args.fmu_cache, progress=say)
+                              fmu_cache=args.fmu_cache, progress=progress)
     say(report.markdown.read_text().split("## ")[0])
     return 0 if report.all_inside else 1
 
@@ -81,7 +82,7 @@ def _run(args: argparse.Namespace) -> int:
     result = cosimulate(args.line or "en50318-2002", _setup(args), speed_kmh=args.speed,
                         time_step=args.time_step, communication_step=args.communication_step,
                         element_length=args.element_length, damping=not args.no_damping,
-                        interface=args.interface, fmu_cache=args.fmu_cache, progress=say)
+                        interface=args.interface, fmu_cache=args.fmu_cache, progress=progress)
     statistics = result.statistics().to_dict()
     say(f"{result.message}; {result.timing['simulated_seconds_per_wall_second']:.2f} "
         "simulated s per wall s")
@@ -113,7 +114,8 @@ def register(add: Callable) -> None:
     p.add_argument("--speed", type=float, help="running speed [km/h]")
     p.add_argument("--pantograph", help="en50318-2002 (default), benchmark-2015, physical, "
                    "physical-linear")
-    p.add_argument("--pressure", type=float, help="bellow pressure of the physical pantograph "
+    p.add_argument("--pressure", type=non_negative_float,
+                   help="bellow pressure of the physical pantograph "
                    "[bar] (default 4)")
     p.add_argument("--fmu", help="a pantograph FMU file (yours, or a built project FMU)")
     p.add_argument("--height-input", default="eta", help="FMU input for the wire height")
@@ -121,17 +123,17 @@ def register(add: Callable) -> None:
     p.add_argument("--head-output", help="FMU output for the head height (optional)")
     p.add_argument("--height-offset", type=float, default=0.0,
                    help="added to the wire height [m] before it goes to your FMU")
-    p.add_argument("--time-step", type=float, default=5e-4,
+    p.add_argument("--time-step", type=positive_float, default=5e-4,
                    help="catenary time step = default communication step [s] (5e-4)")
-    p.add_argument("--communication-step", type=float,
+    p.add_argument("--communication-step", type=positive_float,
                    help="FMU communication step [s], a multiple of the time step")
-    p.add_argument("--element-length", type=float, help="catenary element length [m]")
+    p.add_argument("--element-length", type=positive_float, help="catenary element length [m]")
     p.add_argument("--no-damping", action="store_true", help="switch the line's damping off")
     p.add_argument("--interface", choices=("CS", "ME"), default="CS",
                    help="drive the FMU by Co-Simulation (default) or Model Exchange (CVODE)")
     p.add_argument("--fmu-cache", help="folder for project FMUs built on demand")
     p.add_argument("--out", help="folder for the time series (CSV), plots (PNG), reports")
-    p.add_argument("--csv-every", type=int, default=1, help="write every n-th sample")
+    p.add_argument("--csv-every", type=positive_int, default=1, help="write every n-th sample")
     p.add_argument("--json", help="write the statistics and the settings to this JSON file")
     p.add_argument("--validate-en50318", action="store_true",
                    help="run the EN 50318:2002 validation (with --out DIR)")

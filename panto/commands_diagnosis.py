@@ -23,8 +23,9 @@ import json
 from pathlib import Path
 from typing import Any, Callable
 
-from panto.console import say
-from panto.data_options import add_data_options, load_data
+from panto.console import progress, say
+from panto.data_options import (add_data_options, load_data, non_negative_int, positive_float,
+                                positive_int)
 from panto.data_options import parse_pairs as _pairs
 
 
@@ -79,12 +80,13 @@ def run_diagnose(args: argparse.Namespace) -> int:
         options["free"] = tuple(args.free)
     say(f"diagnose {args.model}: training {args.train} ({len(train)} samples at "
         f"{1 / train.sample_period:g} Hz), validation {args.validate} ({len(validation)} samples)")
+    _check_options(args.model, train, options)
     search = DiagnosisOptions(candidates=tuple(args.candidates or EFFECTS),
                               roles=_roles(args.roles), max_effects=args.max_effects,
                               folds=args.folds,
                               global_fit=GlobalFitOptions() if args.global_fit else None)
     result = diagnose(train, validation, structure=args.model, structure_options=options,
-                      options=search, progress=say)
+                      options=search, progress=progress)
     say(f"verdict: {result.verdict}" + (f" ({' then '.join(result.effects)})"
                                         if result.effects else ""))
     for output in result.output_names:
@@ -101,6 +103,23 @@ def run_diagnose(args: argparse.Namespace) -> int:
     return 0
 
 
+def _check_options(model: str, train, options: dict[str, Any]) -> None:
+    """Build the nominal once with the ``--option`` values: an option the structure does not
+    take is refused by name before the diagnosis starts."""
+    from panto.identification.structures.registry import build_structure
+
+    if not options:
+        return
+    try:
+        build_structure(model, train, options)
+    except TypeError as error:
+        if "keyword argument" not in str(error):
+            raise
+        wrong = str(error).rsplit(" ", 1)[-1]
+        raise ValueError(f"--option: structure {model!r} takes no option {wrong} ({error})"
+                         ) from None
+
+
 def run_benchmark(args: argparse.Namespace) -> int:
     """Draw the cases, diagnose them blind in parallel, score, write JSON + markdown + PNG."""
     from concurrent.futures import ProcessPoolExecutor
@@ -112,7 +131,7 @@ def run_benchmark(args: argparse.Namespace) -> int:
         raise ValueError(f"--cases {args.cases}, --workers {args.workers}, --duration "
                          f"{args.duration}: need cases >= 1, workers >= 1, duration > 2 s")
     with ProcessPoolExecutor(max_workers=args.workers) as pool:
-        result = run_diagnosis_benchmark(args.cases, args.seed, executor=pool, progress=say,
+        result = run_diagnosis_benchmark(args.cases, args.seed, executor=pool, progress=progress,
                                          duration=args.duration, structure=args.model)
     target = Path(args.json) if args.json else Path(args.out) / "diagnosis_benchmark.json"
     paths = write_benchmark(result, target)
@@ -134,8 +153,10 @@ def register(add: Callable) -> None:
     p.add_argument("--free", nargs="*", help="free parameters of the nominal")
     p.add_argument("--option", nargs="*", help="structure option KEY=VALUE (e.g. centre=true, "
                    "cutoff=0.2, input_delay=1)")
-    p.add_argument("--max-effects", type=int, default=3)
-    p.add_argument("--folds", type=int, default=4)
+    p.add_argument("--max-effects", type=non_negative_int, default=3,
+                   help="most effects added one after another (default 3)")
+    p.add_argument("--folds", type=positive_int, default=4,
+                   help="blocks of the validation run for the fold statistics (default 4)")
     p.add_argument("--global-fit", action="store_true",
                    help="fit the nominal from the data's frequency response and several starts, "
                         "and say whether the global optimum was found (slower)")
@@ -144,10 +165,10 @@ def register(add: Callable) -> None:
 
     b = add("diagnose-benchmark", run_benchmark, "blind benchmark of the diagnosis on the virtual "
             "test bed: hidden effects of random magnitude, confusion matrix and scores")
-    b.add_argument("--cases", type=int, required=True, help="number of cases drawn")
-    b.add_argument("--seed", type=int, default=0, help="seed of the draw")
-    b.add_argument("--workers", type=int, default=2, help="processes running the cases")
-    b.add_argument("--duration", type=float, default=25.0, help="length of each run [s]")
+    b.add_argument("--cases", type=positive_int, required=True, help="number of cases drawn")
+    b.add_argument("--seed", type=non_negative_int, default=0, help="seed of the draw")
+    b.add_argument("--workers", type=positive_int, default=2, help="processes running the cases")
+    b.add_argument("--duration", type=positive_float, default=25.0, help="length of each run [s]")
     b.add_argument("--model", default="physical-linear", help="nominal structure")
     b.add_argument("--out", default=".", help="folder for diagnosis_benchmark.json/.md/.png")
     b.add_argument("--json", help="JSON path (the .md and _confusion.png go beside it)")

@@ -10,6 +10,11 @@
 * ``--discriminate EFFECT`` (``F_f1``: friction on the two-mass oscillator's lower mass;
   ``T_f``: hinge friction in the nonlinear pantograph FMU): the input that makes the effect
   show (T-optimality, :mod:`panto.identification.design.discrimination`), exported the same way.
+* ``--closed-loop``: the loop of thesis section 5.5 on the virtual test bed
+  (:mod:`panto.identification.design.closed_loop`): identify from an APRBS run, design run 2 at
+  that estimate, run it, re-identify from both runs; writes ``closed_loop.json``,
+  ``closed_loop.md`` (predicted vs achieved std per parameter, verdicts before and after) and
+  ``closed_loop.png``. ``--repeat`` runs the APRBS again instead of the design (the control).
 * ``--thesis-example``: the thesis' section 5.4 example (:mod:`panto.identification.design.thesis_example`)
   with its plots.
 """
@@ -20,7 +25,8 @@ import json
 from collections.abc import Callable
 from pathlib import Path
 
-from panto.console import say
+from panto.console import progress, say
+from panto.data_options import non_negative_int, positive_float, positive_int
 
 
 def register(add: Callable) -> None:
@@ -28,26 +34,44 @@ def register(add: Callable) -> None:
     p = add("doe", run_doe, "design the next rig run: D/A/E-optimal inputs for a pantograph "
             "structure or a discrimination input, as a rig profile (thesis chapter 5)")
     p.add_argument("--model", default="physical-linear",
-                   choices=("physical-linear", "two-mass", "three-mass"))
+                   choices=("physical-linear", "two-mass", "three-mass"),
+                   help="structure designed for (default physical-linear)")
     p.add_argument("--parameters", help="parameter file (e.g. an identification's "
                    "parameters.json); default: the structure's nominal values")
     p.add_argument("--free", nargs="+", help="parameters to design for (default: the "
                    "structure's free parameters)")
-    p.add_argument("--duration", type=float, default=60.0, help="run length [s] (60)")
-    p.add_argument("--criterion", choices=("D", "A", "E"), default="D")
+    p.add_argument("--duration", type=positive_float, default=60.0, help="run length [s] (60)")
+    p.add_argument("--criterion", choices=("D", "A", "E"), default="D",
+                   help="optimality criterion of the covariance (default D)")
     p.add_argument("--discriminate", choices=("F_f1", "T_f"),
                    help="design to detect this effect instead (F_f1 uses --model two-mass, T_f "
                    "the nonlinear pantograph)")
     p.add_argument("--effect-size", type=float, help="size of the effect (N or N m)")
-    p.add_argument("--population", type=int, help="GA population (40; 12 for --discriminate)")
-    p.add_argument("--generations", type=int, help="GA generations (150; 15 for --discriminate)")
+    p.add_argument("--population", type=positive_int,
+                   help="GA population (40; 12 for --discriminate)")
+    p.add_argument("--generations", type=positive_int,
+                   help="GA generations (150; 15 for --discriminate)")
     p.add_argument("--minimum-contact-force", type=float, default=20.0,
                    help="least predicted contact force [N] (20)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the GA (0)")
     p.add_argument("--out", default="doe_design", help="output folder (doe_design)")
     p.add_argument("--json", help="also write the summary to this JSON file")
     p.add_argument("--thesis-example", action="store_true",
                    help="run the thesis' section 5.4 example and write its plots into --out")
+    loop = p.add_argument_group("closed loop (thesis 5.5 on the virtual test bed)")
+    loop.add_argument("--closed-loop", action="store_true",
+                      help="identify from an APRBS run of --duration, design run 2 there, run it "
+                      "on the virtual test bed, re-identify from both: predicted vs achieved std")
+    loop.add_argument("--repeat", action="store_true",
+                      help="with --closed-loop: run 2 repeats the APRBS (the control)")
+    loop.add_argument("--fmu", help="the plant's Pantograph FMU (default: the project's)")
+    loop.add_argument("--true-parameters", help="the plant's parameter file (default: the "
+                      "FMU's values)")
+    loop.add_argument("--start-factor", type=float, default=1.1,
+                      help="without --parameters the fit starts at the plant's values times this "
+                      "(1.1)")
+    loop.add_argument("--outputs", nargs="+", default=["F_c", "y_cb"], choices=("F_c", "y_cb"),
+                      help="outputs fitted and designed for (F_c y_cb)")
 
 
 def read_parameters(path: str | Path) -> dict[str, float]:
@@ -67,7 +91,34 @@ def read_parameters(path: str | Path) -> dict[str, float]:
         if not isinstance(value, (int, float)):
             raise SystemExit(f"{path}: parameter {name!r} has no numeric value ({entry!r})")
         values[name] = float(value)
-    return values
+    return _in_model_units(path, data.get("model"), values)
+
+
+#: The fmu_src model whose parameter file each designed structure reads.
+FILE_MODELS = {"physical-linear": "Pantograph", "two-mass": "TwoMass", "three-mass": "ThreeMass"}
+
+
+def _in_model_units(path: Path, model: str | None, values: dict[str, float]) -> dict[str, float]:
+    """`values` with units converted (or refused) as the named model's parameter file says."""
+    from panto.fmu_src.models import FMU_NAMES, default_parameters
+    from panto.fmu_src.parameters import ParameterSet
+
+    if model not in FMU_NAMES:
+        return values
+    loaded = ParameterSet.load(path, default_parameters(model).specs, model)  # units, bounds
+    return {name: float(loaded.values.get(name, value)) for name, value in values.items()}
+
+
+def _check_file_model(path: str, structure: str, values: dict[str, float], known) -> None:
+    """A parameter file for another model, or with names the structure lacks, is refused."""
+    model = json.loads(Path(path).read_text(encoding="utf-8")).get("model")
+    if model is not None and model != FILE_MODELS.get(structure, model):
+        raise ValueError(f"--parameters {path}: parameters are for model {model!r}; {structure} "
+                         f"reads a {FILE_MODELS[structure]!r} file")
+    unknown = sorted(set(values) - set(known))
+    if unknown and structure != "physical-linear":
+        raise ValueError(f"--parameters {path}: {unknown} are not parameters of {structure} "
+                         f"(its: {', '.join(known)})")
 
 
 def _model(args: argparse.Namespace, constraints, n_samples: int):
@@ -80,6 +131,8 @@ def _model(args: argparse.Namespace, constraints, n_samples: int):
         structure = "physical-linear"
     values = read_parameters(args.parameters) if args.parameters else {}
     probe = LinearisedPantograph.structure_for(structure)
+    if args.parameters:
+        _check_file_model(args.parameters, structure, values, probe.parameter_names)
     parameters = {k: v for k, v in values.items() if k in probe.parameter_names}
     fixed = {k: v for k, v in values.items() if k not in probe.parameter_names} \
         if structure == "physical-linear" else {}
@@ -98,6 +151,10 @@ def run_doe(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     if args.thesis_example:
         return _thesis_example(out)
+    if args.closed_loop:
+        return _closed_loop(args, out)
+    if args.repeat or args.fmu or args.true_parameters:
+        raise SystemExit("panto doe: --repeat, --fmu and --true-parameters need --closed-loop")
     from panto.identification.design.constraints import RigInputConstraints
     from panto.identification.design.pantograph import DesignOptions
 
@@ -114,7 +171,7 @@ def run_doe(args: argparse.Namespace) -> int:
     options = DesignOptions(population=args.population or 40,
                             generations=args.generations or 150, seed=args.seed)
     design = design_pantograph_experiment(model, constraints, criterion=args.criterion,
-                                          options=options, progress=say)
+                                          options=options, progress=progress)
     paths = write_design_report(design, out)
     say(f"{'parameter':>10} {'value':>12} {'std designed':>14} {'std APRBS':>12} {'ratio':>7}")
     for row in design.covariance_table():
@@ -131,7 +188,7 @@ def _discriminate(args, model, constraints, out: Path) -> int:
     options = DesignOptions(population=args.population or 12,
                             generations=args.generations or 15, seed=args.seed)
     effect = EffectModel(args.discriminate, model, args.effect_size)
-    design = design_discrimination(effect, constraints, options=options, progress=say)
+    design = design_discrimination(effect, constraints, options=options, progress=progress)
     profile, table = write_design_profile(
         design.motor_position, design.pressure_demand, constraints, out,
         name=f"discriminate_{args.discriminate}",
@@ -153,11 +210,48 @@ def _finish(args, summary: dict, paths: dict) -> int:
     return 0
 
 
+def _closed_loop(args: argparse.Namespace, out: Path) -> int:
+    from panto.build_fmu.project import project_fmu
+    from panto.fmu_src.models import default_parameters
+    from panto.identification.design.closed_loop import (ClosedLoopOptions, VirtualTestBedRunner,
+                                                         closed_loop_experiment,
+                                                         write_closed_loop_report)
+    from panto.identification.design.constraints import RigInputConstraints
+    from panto.identification.design.pantograph import DesignOptions
+    from panto.identification.design.pantograph_sensitivity import LinearisedPantograph
+
+    defaults = default_parameters("Pantograph")
+    plant = {n: float(defaults[n]) for n in defaults.names} | (
+        read_parameters(args.true_parameters) if args.true_parameters else {})
+    structure = LinearisedPantograph.structure_for(args.model)
+    known = set(structure.parameter_names)
+    truth = {k: v for k, v in plant.items() if k in known} if args.model == "physical-linear" \
+        else {}
+    options = ClosedLoopOptions(
+        structure=args.model, free=tuple(args.free) if args.free else None,
+        duration=args.duration, criterion=args.criterion, outputs=tuple(args.outputs),
+        next_run="repeat" if args.repeat else "designed",
+        design=DesignOptions(population=args.population or 40,
+                             generations=args.generations or 150, seed=args.seed))
+    if args.parameters:
+        initial = {k: v for k, v in read_parameters(args.parameters).items() if k in known}
+    else:
+        start = truth or structure.nominal()
+        initial = {k: args.start_factor * v for k, v in start.items()}
+    runner = VirtualTestBedRunner(args.fmu or project_fmu("Pantograph"), out / "runs",
+                                  parameters=plant, seed=args.seed)
+    constraints = RigInputConstraints.from_rig(minimum_contact_force=args.minimum_contact_force)
+    result = closed_loop_experiment(runner, options=options, constraints=constraints,
+                                    initial=initial, truth=truth, progress=progress)
+    say(result.markdown())
+    return _finish(args, result.summary(), write_closed_loop_report(result, out))
+
+
 def _thesis_example(out: Path) -> int:
     from panto.identification.design.thesis_example import run_thesis_example
     from panto.identification.design.plots import plot_line_designs, plot_thesis_example
 
-    example = run_thesis_example(progress=say)
+    example = run_thesis_example(progress=progress)
     paths = [plot_line_designs(out / "doe_line.png"), *plot_thesis_example(example, out),
              *example.write(out)]
     for path in paths:

@@ -23,8 +23,9 @@ import math
 from pathlib import Path
 from typing import Callable
 
-from panto.console import say
-from panto.data_options import add_data_options, load_data
+from panto.console import progress, say
+from panto.data_options import (add_data_options, load_data, non_negative_float, non_negative_int,
+                                positive_int)
 
 
 #: Structures whose fit can start from the data (``--initial data``: they have a linear system).
@@ -89,7 +90,7 @@ def run_identify(args: argparse.Namespace) -> int:
         f"{1.0 / data.sample_period:g} Hz")
     executor = _executor(args.workers)
     try:
-        result = identifier(args.model).identify(data, executor=executor, progress=say,
+        result = identifier(args.model).identify(data, executor=executor, progress=progress,
                                                  **options)
     finally:
         if executor is not None:
@@ -180,10 +181,14 @@ def register(add: Callable[..., argparse.ArgumentParser]) -> None:
     p.add_argument("--validate", help="validation data (run folder or table, same columns)")
     p.add_argument("--free", nargs="+", help="parameters to estimate (default: the structure's)")
     p.add_argument("--fix", nargs="+", metavar="NAME=VALUE", help="parameters held fixed")
-    p.add_argument("--method", default="lm", choices=("lm", "nsga2"))
-    p.add_argument("--multistart", type=int, default=0, help="extra LM runs from random starts")
-    p.add_argument("--seed", type=int, default=None, help="seed of the multistart points")
-    p.add_argument("--max-evaluations", type=int, default=2000)
+    p.add_argument("--method", default="lm", choices=("lm", "nsga2"),
+                   help="Levenberg-Marquardt (lm, default) or the NSGA-II Pareto front (nsga2)")
+    p.add_argument("--multistart", type=non_negative_int, default=0,
+                   help="extra LM runs from random starts")
+    p.add_argument("--seed", type=non_negative_int, default=None,
+                   help="seed of the multistart points")
+    p.add_argument("--max-evaluations", type=positive_int, default=2000,
+                   help="budget of model evaluations of the fit (default 2000)")
     p.add_argument("--keep-unidentifiable", action="store_true",
                    help="lm: leave parameters the run cannot pin free (default: fix them at their "
                         "prior and refit, reported as 'fixed at prior')")
@@ -192,14 +197,15 @@ def register(add: Callable[..., argparse.ArgumentParser]) -> None:
                         "data's frequency response and perturbations (fit_global; "
                         f"{', '.join(DATA_STARTS)}), which prints whether the starts agree on "
                         "a global optimum and keeps parameters the run cannot pin free")
-    p.add_argument("--workers", type=int, default=1, help="processes for the evaluations")
+    p.add_argument("--workers", type=positive_int, default=1, help="processes for the evaluations")
     p.add_argument("--out", help="folder for parameters.json, result.json and fit.png")
     p.add_argument("--json", help="also write the result summary as JSON")
     add_data_options(p)
     p.add_argument("--start", type=float, help="start of the time window [s]")
     p.add_argument("--stop", type=float, help="end of the time window [s]")
-    p.add_argument("--cross-bar", default="laser", choices=("laser", "video"))
-    p.add_argument("--position-latency", type=float,
+    p.add_argument("--cross-bar", default="laser", choices=("laser", "video"),
+                   help="rig runs: the measurement that gives y_cb (default laser)")
+    p.add_argument("--position-latency", type=non_negative_float,
                    help="how late the drive reports the slider position [s] (default: the run's "
                         "recorded rig set-up, else 0); physical structures also take "
                         "--fix eta_delay=SECONDS or --free ... eta_delay")

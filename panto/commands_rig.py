@@ -11,10 +11,12 @@ from __future__ import annotations
 import argparse
 import importlib
 import json
+from dataclasses import fields, replace
 from pathlib import Path
 from typing import Callable
 
-from panto.console import say
+from panto.console import progress, say
+from panto.data_options import non_negative_float, non_negative_int, positive_float, positive_int
 
 
 def _imperfections(text: str):
@@ -30,7 +32,17 @@ def _imperfections(text: str):
     except (OSError, json.JSONDecodeError) as error:
         raise ValueError(f"--imperfections {text}: not 'none', 'default' or a readable JSON "
                          f"file ({error})") from None
-    return RigImperfections.from_dict(values)
+    if not isinstance(values, dict):
+        raise ValueError(f"--imperfections {text}: expected a JSON object of imperfection names")
+    known = {f.name for f in fields(RigImperfections)}
+    unknown = sorted(set(values) - known - {"provenance"})
+    if unknown:
+        raise ValueError(f"--imperfections {text}: unknown imperfection(s) {unknown}; known: "
+                         f"{', '.join(sorted(known))}")
+    try:
+        return RigImperfections.from_dict(values)
+    except TypeError as error:
+        raise ValueError(f"--imperfections {text}: {error}") from None
 
 
 def _pantograph_fmu(args: argparse.Namespace) -> Path:
@@ -38,21 +50,40 @@ def _pantograph_fmu(args: argparse.Namespace) -> Path:
         return Path(args.fmu)
     from panto.build_fmu.project import project_fmu
 
-    return project_fmu("Pantograph", progress=say)
+    return project_fmu("Pantograph", progress=progress)
 
 
 def run_rig_run(args: argparse.Namespace) -> int:
     """Play a profile and record the run."""
     from panto.rig.profiles import load_profile
     from panto.rig.recorder import new_run_folder
-    from panto.rig.session import RunOptions
 
     profile = load_profile(args.profile)
     if args.duration is not None:
-        from dataclasses import replace
+        from panto.rig.profiles import check_profile
 
         profile = replace(profile, duration=args.duration)
+        check_profile(profile, source=f"{args.profile} with --duration {args.duration:g}")
+    imperfections = _imperfections(args.imperfections)  # refused before a folder is made
+    fmu = None if args.interface else _pantograph_fmu(args)
+    if args.interface and not args.io:
+        raise ValueError("a real rig needs --io MODULE:FACTORY: a function returning the rig's "
+                         "analogue I/O (an object with read_sensors(now), write_valve_voltage(v), "
+                         "write_led(bit); see panto.rig.session.RigIO)")
+    existed = bool(args.folder) and Path(args.folder).exists()
     folder = Path(args.folder) if args.folder else new_run_folder(args.out)
+    try:
+        return _record(args, profile, folder, imperfections, fmu)
+    except BaseException:
+        if not existed and folder.is_dir() and not any(folder.iterdir()):
+            folder.rmdir()  # nothing was recorded: leave no empty run folder
+        raise
+
+
+def _record(args: argparse.Namespace, profile, folder: Path, imperfections, fmu) -> int:
+    """Run `profile` into `folder` (real rig, real time or lock step); print the outcome."""
+    from panto.rig.session import RunOptions
+
     options = RunOptions(formats=tuple(args.formats), notes=args.notes or "",
                          rig_setup={key: value for key, value in
                                     (("motor_zero_height", args.motor_zero_height),
@@ -64,16 +95,14 @@ def run_rig_run(args: argparse.Namespace) -> int:
         from panto.rig.realtime import run_virtual_profile_realtime
 
         result = run_virtual_profile_realtime(
-            profile, fmu_path=_pantograph_fmu(args), folder=folder,
-            imperfections=_imperfections(args.imperfections), seed=args.seed, options=options,
-            progress=say)
+            profile, fmu_path=fmu, folder=folder, imperfections=imperfections, seed=args.seed,
+            options=options, progress=progress)
     else:
         from panto.rig.virtual import run_virtual_profile
 
         result = run_virtual_profile(
-            profile, fmu_path=_pantograph_fmu(args), folder=folder,
-            imperfections=_imperfections(args.imperfections), seed=args.seed, options=options,
-            progress=say)
+            profile, fmu_path=fmu, folder=folder, imperfections=imperfections, seed=args.seed,
+            options=options, progress=progress)
     say(f"{result.samples} samples, {result.late_cycles} late cycles; status: {result.status}")
     return 0 if result.success else 1
 
@@ -84,10 +113,6 @@ def _run_on_rig(args: argparse.Namespace, profile, folder: Path, options):
     from panto.rig.drive import LinearMotorDriver
     from panto.rig.session import run_profile
 
-    if not args.io:
-        raise ValueError("a real rig needs --io MODULE:FACTORY: a function returning the rig's "
-                         "analogue I/O (an object with read_sensors(now), write_valve_voltage(v), "
-                         "write_led(bit); see panto.rig.session.RigIO)")
     module_name, _, factory_name = args.io.partition(":")
     try:
         factory = getattr(importlib.import_module(module_name), factory_name)
@@ -99,7 +124,7 @@ def _run_on_rig(args: argparse.Namespace, profile, folder: Path, options):
                                 position_limits=(profile.limits.motor_min,
                                                  profile.limits.motor_max)) as driver:
         return run_profile(profile, driver=driver, io=factory(), clock=clock, folder=folder,
-                           options=options, progress=say)
+                           options=options, progress=progress)
 
 
 def run_rig_emulate(args: argparse.Namespace) -> int:
@@ -107,7 +132,7 @@ def run_rig_emulate(args: argparse.Namespace) -> int:
     from panto.rig.realtime import serve_emulator
 
     serve_emulator({"interface": args.interface, "channel": args.channel},
-                   fmu_path=_pantograph_fmu(args), duration=args.duration, progress=say)
+                   fmu_path=_pantograph_fmu(args), duration=args.duration, progress=progress)
     return 0
 
 
@@ -140,7 +165,8 @@ def run_rig_check(args: argparse.Namespace) -> int:
 def register(add: Callable) -> None:
     """Declare ``panto rig`` with its sub-subcommands."""
     rig = add("rig", _dispatch, "rig sidecar: run a profile, emulate the rig, preview, check")
-    sub = rig.add_subparsers(dest="rig_command", required=True)
+    sub = rig.add_subparsers(dest="rig_command", required=True,
+                             help="what to do; 'panto rig WHAT --help' for its options")
 
     p = sub.add_parser("run", help="play a profile and record the run (virtual test bed unless "
                                    "--interface is given)")
@@ -148,23 +174,24 @@ def register(add: Callable) -> None:
     p.add_argument("profile", help="profile file (JSON), e.g. rig/profiles/aprbs_training.json")
     p.add_argument("--out", default="runs", help="folder of numbered runs (default: runs)")
     p.add_argument("--folder", help="exact run folder (refused if it holds a run)")
-    p.add_argument("--duration", type=float, help="override the profile's duration [s]")
+    p.add_argument("--duration", type=positive_float, help="override the profile's duration [s]")
     p.add_argument("--formats", nargs="*", default=["parquet", "mat"], choices=("parquet", "mat"),
                    help="copies written beside the incremental CSV")
     p.add_argument("--notes", help="free text stored in the run's metadata")
     p.add_argument("--fmu", help="pantograph FMU of the virtual test bed (default: built)")
     p.add_argument("--imperfections", default="default",
                    help="'default' (the rig as the thesis describes it), 'none', or a JSON file")
-    p.add_argument("--seed", type=int, default=0, help="seed of the emulated sensor noise")
+    p.add_argument("--seed", type=non_negative_int, default=0,
+                   help="seed of the emulated sensor noise")
     p.add_argument("--realtime", action="store_true",
                    help="emulate against the wall clock instead of in lock step")
     p.add_argument("--interface", help="python-can interface of a real rig (e.g. socketcan, pcan)")
     p.add_argument("--channel", help="CAN channel of a real rig (e.g. can0)")
-    p.add_argument("--node-id", type=int, default=63, help="the drive's CANopen node id")
+    p.add_argument("--node-id", type=positive_int, default=63, help="the drive's CANopen node id")
     p.add_argument("--motor-zero-height", type=float,
                    help="height [m] of the bar at slider position 0, recorded in the run's "
                         "metadata for identification (virtual test bed: its own, 2.0 m)")
-    p.add_argument("--position-latency", type=float,
+    p.add_argument("--position-latency", type=non_negative_float,
                    help="how late the drive's reported slider position is [s], recorded for "
                         "identification (virtual test bed: 0.005)")
     p.add_argument("--io", help="MODULE:FACTORY returning the real rig's analogue I/O")
@@ -175,11 +202,11 @@ def register(add: Callable) -> None:
                    help="python-can interface shared with the master (default udp_multicast)")
     p.add_argument("--channel", default=None, help="CAN channel (interface default if omitted)")
     p.add_argument("--fmu", help="pantograph FMU (default: built)")
-    p.add_argument("--duration", type=float, help="stop after this many seconds")
+    p.add_argument("--duration", type=positive_float, help="stop after this many seconds")
 
     p = sub.add_parser("profile", help="render a profile to CSV and a plot before running it")
     p.set_defaults(rig_handler=run_rig_profile)
-    p.add_argument("profile")
+    p.add_argument("profile", help="profile file (JSON)")
     p.add_argument("--out", default="profile_preview", help="output folder")
 
     p = sub.add_parser("check", help="check a dataset against the schema and summarise it")

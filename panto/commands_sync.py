@@ -16,7 +16,8 @@ import json
 from pathlib import Path
 from typing import Callable
 
-from panto.console import say
+from panto.console import progress, say
+from panto.data_options import non_negative_int, positive_float
 
 
 def run_sync(args: argparse.Namespace) -> int:
@@ -27,7 +28,7 @@ def run_sync(args: argparse.Namespace) -> int:
                            min_peak_ratio=args.min_peak_ratio, min_overlap=args.min_overlap,
                            min_led_quality=args.min_led_quality)
     result = sync_and_merge(args.run_folder, args.track_csv, args.out, options=options,
-                            plot=args.plot, progress=say)
+                            plot=args.plot, progress=progress)
     sync = result.sync
     seconds = sync.shift / result.dataset.metadata.sample_rate
     say(f"shift {sync.shift} fine samples = {seconds:+.3f} s (lag {sync.lag} frames, phase "
@@ -101,7 +102,7 @@ def register(add: Callable) -> None:
                    help="refuse below this normalised correlation (default 0.5)")
     p.add_argument("--min-peak-ratio", type=float, default=1.5,
                    help="refuse when best / second-best peak is below this (default 1.5)")
-    p.add_argument("--min-overlap", type=int, default=250,
+    p.add_argument("--min-overlap", type=non_negative_int, default=250,
                    help="camera frames that must overlap the run (default 250 = 5 s)")
     p.add_argument("--min-led-quality", type=float, default=0.0,
                    help="LED bits of lower quality count as unknown (default 0)")
@@ -111,9 +112,11 @@ def register(add: Callable) -> None:
     p = add("preprocess", run_preprocess, "zero-phase low-pass and resample a dataset "
                                           "(thesis 4.2: 500 -> 50 Hz, 20 Hz stop band)")
     p.add_argument("dataset", help="dataset file or run folder")
-    p.add_argument("--rate", type=float, default=50.0, help="target rate [Hz] (default 50)")
-    p.add_argument("--stopband", type=float, default=20.0, help="stop-band edge [Hz]")
-    p.add_argument("--passband", type=float, help="pass-band edge [Hz] (default stopband / 2)")
+    p.add_argument("--rate", type=positive_float, default=50.0,
+                   help="target rate [Hz] (default 50)")
+    p.add_argument("--stopband", type=positive_float, default=20.0, help="stop-band edge [Hz]")
+    p.add_argument("--passband", type=positive_float,
+                   help="pass-band edge [Hz] (default stopband / 2)")
     p.add_argument("--channels", nargs="*", help="channels to keep (default all)")
     p.add_argument("--out", required=True, help="output dataset (.csv, .parquet or .mat)")
 
@@ -122,7 +125,7 @@ def register(add: Callable) -> None:
     p.add_argument("run_a", help="first run (folder or dataset file)")
     p.add_argument("run_b", help="second run, at another sample rate")
     p.add_argument("--channel", default="force", help="channel to compare (default force)")
-    p.add_argument("--band-width", type=float, default=5.0, help="band width [Hz]")
+    p.add_argument("--band-width", type=positive_float, default=5.0, help="band width [Hz]")
     p.add_argument("--tolerance-db", type=float, default=6.0,
                    help="largest band difference still counted as agreement [dB]")
     p.add_argument("--out", required=True, help="plot (PNG)")

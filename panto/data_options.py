@@ -12,11 +12,16 @@ through the library's :func:`panto.identification.data.loading.load_identificati
 - ``--sample-rate HZ`` for a table without a ``time``/``t`` column, ``--rate HZ`` to decimate
   (rig runs: 50 Hz by default), ``--train-samples``/``--validate-samples START:STOP`` to select
   rows, ``--eta-offset`` for rig runs.
+
+It also holds the checked option types every command uses (:func:`positive_float`,
+:func:`positive_int`, :func:`non_negative_int`, :func:`non_negative_float`): a value out of range
+is a usage error naming the option, the value and the allowed range, before any work.
 """
 from __future__ import annotations
 
 import argparse
-from typing import Any
+import math
+from typing import Any, Callable
 
 
 def parse_pairs(items: list[str] | None, flag: str) -> dict[str, str]:
@@ -37,9 +42,42 @@ def parse_rows(text: str | None, flag: str = "--train-samples") -> slice:
         return slice(None)
     start, _, stop = text.partition(":")
     try:
-        return slice(int(start) if start else None, int(stop) if stop else None)
+        rows = slice(int(start) if start else None, int(stop) if stop else None)
     except ValueError:
         raise ValueError(f"{flag} {text!r}: expected START:STOP (sample numbers)") from None
+    if rows.start is not None and rows.stop is not None and (rows.start >= 0) == (rows.stop >= 0) \
+            and rows.stop <= rows.start:
+        raise ValueError(f"{flag} {text!r}: selects no rows; STOP must be greater than START")
+    return rows
+
+
+def _checked_number(kind: Callable[[str], Any], test: Callable[[Any], bool], allowed: str
+                    ) -> Callable[[str], Any]:
+    """An argparse ``type``: `kind` of the text, refused unless ``test(value)``."""
+
+    def convert(text: str) -> Any:
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a number ({allowed})") from None
+        if isinstance(value, float) and not math.isfinite(value) or not test(value):
+            raise argparse.ArgumentTypeError(f"{text} is out of range: must be {allowed}")
+        return value
+
+    convert.__name__ = kind.__name__  # argparse names the type in its messages
+    convert.__doc__ = (f"An argparse ``type``: the option's text as {kind.__name__}, refused "
+                       f"unless it is {allowed}.")
+    return convert
+
+
+#: An argparse ``type``: a finite number > 0.
+positive_float = _checked_number(float, lambda v: v > 0.0, "a number > 0")
+#: An argparse ``type``: a finite number >= 0.
+non_negative_float = _checked_number(float, lambda v: v >= 0.0, "a number >= 0")
+#: An argparse ``type``: an integer >= 1.
+positive_int = _checked_number(int, lambda v: v >= 1, "an integer >= 1")
+#: An argparse ``type``: an integer >= 0.
+non_negative_int = _checked_number(int, lambda v: v >= 0, "an integer >= 0")
 
 
 def add_data_options(parser: argparse.ArgumentParser) -> None:
@@ -48,9 +86,9 @@ def add_data_options(parser: argparse.ArgumentParser) -> None:
                         help="input signals from named columns (any table or dataset)")
     parser.add_argument("--outputs", nargs="*", metavar="NAME=COLUMN",
                         help="output signals from named columns (any table or dataset)")
-    parser.add_argument("--rate", type=float,
+    parser.add_argument("--rate", type=positive_float,
                         help="identification rate [Hz]: decimate to it (rig runs: 50)")
-    parser.add_argument("--sample-rate", type=float,
+    parser.add_argument("--sample-rate", type=positive_float,
                         help="rate [Hz] of a table without a time column")
     parser.add_argument("--train-samples", metavar="START:STOP",
                         help="rows of the training file")

@@ -28,7 +28,7 @@ import numpy as np
 
 from panto.fmu_src.dataformat import (DataFormatError, csv_header, csv_read_options,
                                       data_suffix, format_csv_row, metadata_path_for, parse_header,
-                                      read_side_file, write_side_file)
+                                      read_side_file, read_text_file, write_side_file)
 
 FORMAT = "panto-rig-dataset"
 VERSION = 1
@@ -265,12 +265,12 @@ def check_dataset(time: Any, channels: Mapping[str, Any], units: Mapping[str, st
     time = _frozen(time, f"{source}: time")
     if not np.all(np.isfinite(time)):
         index = int(np.flatnonzero(~np.isfinite(time))[0])
-        raise DatasetError(f"{source}: time is not finite at row {index} ({time[index]!r})")
+        raise DatasetError(f"{source}: time is not finite at row {index} ({time[index]})")
     steps = np.diff(time)
     if np.any(steps <= 0.0):
         index = int(np.flatnonzero(steps <= 0.0)[0])
         raise DatasetError(f"{source}: time is not strictly increasing at row {index + 1} "
-                           f"({time[index]!r} then {time[index + 1]!r})")
+                           f"({time[index]:.9g} s then {time[index + 1]:.9g} s)")
     missing = [name for name in required if name not in channels]
     if missing:
         raise DatasetError(f"{source}: required channel(s) {missing} missing; channels are "
@@ -289,7 +289,7 @@ def check_dataset(time: Any, channels: Mapping[str, Any], units: Mapping[str, st
         spec = STANDARD_CHANNELS.get(name)
         if spec is not None and not spec.allow_nan and np.any(np.isnan(array)):
             row = int(np.flatnonzero(np.isnan(array))[0])
-            raise DatasetError(f"{where}: NaN at row {row} (t = {time[row]!r} s), not allowed "
+            raise DatasetError(f"{where}: NaN at row {row} (t = {time[row]:.9g} s), not allowed "
                                "in this channel")
         if np.any(np.isinf(array)):
             raise DatasetError(f"{where}: infinite value at row "
@@ -367,7 +367,10 @@ def read_csv(path: str | Path, *, required: Sequence[str] = REQUIRED_CHANNELS,
     import pandas as pd
 
     path = Path(path)
-    text = path.read_text(encoding="utf-8")
+    try:
+        text = read_text_file(path)
+    except DataFormatError as error:
+        raise DatasetError(str(error)) from None
     warnings = []
     if text and not text.endswith("\n"):
         text = text[: text.rfind("\n") + 1]
@@ -375,6 +378,8 @@ def read_csv(path: str | Path, *, required: Sequence[str] = REQUIRED_CHANNELS,
     lines = text.splitlines()
     if not lines:
         raise DatasetError(f"{path}: file is empty")
+    if len(lines) == 1:
+        raise DatasetError(f"{path}: no data rows (only the header {lines[0][:60]!r})")
     headers = [parse_header(h) for h in lines[0].split(",")]
     if headers[0] not in (("time", "s"), ("time", "")):
         raise DatasetError(f"{path}: first column must be 'time [s]', got "
@@ -545,9 +550,10 @@ def read_dataset(path: str | Path, *, required: Sequence[str] = REQUIRED_CHANNEL
     if path.is_dir():
         path = path / "run.csv"
     readers = {".csv": read_csv, ".parquet": read_parquet, ".mat": read_mat}
-    suffix = _suffix(path)
     if not path.is_file():
-        raise DatasetError(f"{path}: no such dataset file")
+        raise DatasetError(f"{path}: no such "
+                           f"{'dataset file' if path.suffix else 'file or run folder'}")
+    suffix = _suffix(path)
     return readers[suffix](path, required=required, convert_units=convert_units)
 
 

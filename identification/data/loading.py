@@ -103,13 +103,16 @@ def read_table(source: str | Path | Table) -> dict[str, np.ndarray]:
 def _file_columns(path: Path) -> dict[str, np.ndarray]:
     from panto.fmu_src.dataformat import TABLE_SUFFIXES, data_suffix
 
-    suffix = data_suffix(path, "table", TABLE_SUFFIXES)
     if not path.is_file():
-        raise ValueError(f"{path}: no such file")
+        raise ValueError(f"{path}: no such {'file' if path.suffix else 'file or run folder'}")
+    suffix = data_suffix(path, "table", TABLE_SUFFIXES)
     if suffix == ".mat":
         import scipy.io
 
-        raw = scipy.io.loadmat(path)
+        try:
+            raw = scipy.io.loadmat(path)
+        except Exception as error:  # scipy's errors do not name the file
+            raise ValueError(f"{path}: not a readable .mat file ({error})") from None
         return {k: np.asarray(v, float).ravel() for k, v in raw.items()
                 if not k.startswith("__") and isinstance(v, np.ndarray) and v.dtype.kind in "fiu"
                 and v.size > 1 and min(v.shape) == 1}
@@ -120,8 +123,30 @@ def _file_columns(path: Path) -> dict[str, np.ndarray]:
             raise ValueError(f"{path}: HDF5 needs PyTables: pip install tables")
         frame = pd.read_hdf(path)
     else:
-        frame = pd.read_parquet(path) if suffix == ".parquet" else pd.read_csv(path)
+        frame = _read_frame(path, suffix)
+    if len(frame) == 0:
+        raise ValueError(f"{path}: no data rows (only a header)")
     return _memory_columns(frame)
+
+
+def _read_frame(path: Path, suffix: str) -> Any:
+    """A CSV or Parquet file as a DataFrame; a reader's error names the file."""
+    import pandas as pd
+
+    from panto.fmu_src.dataformat import read_text_file
+
+    if suffix == ".parquet":
+        try:
+            return pd.read_parquet(path)
+        except Exception as error:  # pyarrow's errors do not name the file
+            raise ValueError(f"{path}: not a readable Parquet file ({error})") from None
+    try:
+        return pd.read_csv(path)
+    except UnicodeDecodeError:
+        read_text_file(path, "CSV")  # raises, saying what the file is (e.g. Parquet)
+        raise
+    except pd.errors.EmptyDataError:
+        raise ValueError(f"{path}: file is empty") from None
 
 
 def _memory_columns(table: Table) -> dict[str, np.ndarray]:
@@ -178,6 +203,8 @@ def load_identification_data(source: str | Path | Table,
 
         dataset = read_dataset(path, required=())
     except Exception:  # not a dataset of this product: a plain table
+        if _has_side_file(path):  # it is one, and it is broken: say why
+            raise
         dataset = None
     if dataset is not None:
         _check_named(path, options, dataset.names)
@@ -198,6 +225,12 @@ def _is_run(path: str) -> bool:
     suffix = candidate.suffix.lower()
     return suffix in (".parquet", ".mat") or (suffix == ".csv"
                                               and metadata_path_for(candidate).is_file())
+
+
+def _has_side_file(path: str) -> bool:
+    from panto.fmu_src.dataformat import metadata_path_for
+
+    return Path(path).suffix.lower() == ".csv" and metadata_path_for(path).is_file()
 
 
 def _check_named(where: str, options: LoadOptions, columns: Any) -> None:
@@ -228,9 +261,12 @@ def _table_data(where: str, table: Mapping[str, np.ndarray],
     _check_named(where, options, table)
     missing = [c for c in list(inputs.values()) + list(outputs.values()) if c not in table]
     if missing:
-        raise ValueError(f"{where}: no column(s) {missing}; columns are {sorted(table)}")
+        raise ValueError(f"{where}: {_why_missing(where, missing)}; numeric columns are "
+                         f"{sorted(table)}")
     length = len(next(iter(table.values())))
     time_column = next((table[c] for c in ("time", "t") if c in table), None)
+    _check_values(where, table, [*inputs.values(), *outputs.values()],
+                  None if options.sample_rate else time_column)
     if options.sample_rate:
         time_column = np.arange(length) / options.sample_rate
     elif time_column is not None:  # the median step (printed times carry rounding)
@@ -240,11 +276,46 @@ def _table_data(where: str, table: Mapping[str, np.ndarray],
     u = np.column_stack([table[c] for c in inputs.values()])[options.rows]
     y = np.column_stack([table[c] for c in outputs.values()])[options.rows]
     t = time_column[options.rows]
+    if len(t) < 2:
+        raise ValueError(f"{where}: rows {options.rows.start}:{options.rows.stop} keep {len(t)} of "
+                         f"{length} samples; need at least 2")
     if options.rate:
         factor = int(round(1.0 / ((t[1] - t[0]) * options.rate)))
         if factor > 1:
             t, u, y = t[::factor], decimate_zero_phase(u, factor), decimate_zero_phase(y, factor)
     return IdentificationData(t - t[0], u, y, tuple(inputs), tuple(outputs), source=where)
+
+
+def _why_missing(where: str, missing: list[str]) -> str:
+    """``no column(s) [...]``, or for a column of a CSV file holding text, its first text cell."""
+    if Path(where).suffix.lower() == ".csv" and Path(where).is_file():
+        import pandas as pd
+
+        frame = pd.read_csv(where, dtype=str, keep_default_na=False)
+        for name in (c for c in missing if c in frame.columns):
+            numbers = pd.to_numeric(frame[name].replace("", "nan"), errors="coerce")
+            bad = np.flatnonzero(numbers.isna() & (frame[name].str.lower() != "nan")
+                                 & (frame[name] != ""))
+            if bad.size:
+                return (f"column {name!r} is not numeric: row {bad[0]} (line {bad[0] + 2}) holds "
+                        f"{frame[name].iloc[bad[0]]!r}")
+    return f"no column(s) {missing}"
+
+
+def _check_values(where: str, table: Mapping[str, np.ndarray], names: list[str],
+                  time: np.ndarray | None) -> None:
+    """The columns used must be finite, the time column strictly increasing."""
+    for name in dict.fromkeys(names):
+        bad = np.flatnonzero(~np.isfinite(table[name]))
+        if bad.size:
+            raise ValueError(f"{where}: column {name!r}: {table[name][bad[0]]} at row {bad[0]} "
+                             f"({bad.size} non-finite values); identification needs numbers")
+    if time is not None:
+        steps = np.diff(time)
+        bad = np.flatnonzero(~(steps > 0.0))
+        if bad.size:
+            raise ValueError(f"{where}: time is not strictly increasing at row {bad[0] + 1} "
+                             f"({time[bad[0]]:.9g} s then {time[bad[0] + 1]:.9g} s)")
 
 
 def select_rows(data: IdentificationData, rows: slice) -> IdentificationData:

@@ -1,0 +1,116 @@
+"""The command line's conventions (issue 21): ``--version`` and ``panto.__version__`` from the
+package metadata, ``python -m panto``, exit codes by class documented in ``--help``, help text on
+every option, ``-v``/``-q`` after the subcommand too, Ctrl-C and internal errors in one line,
+a closed pipe ending quietly.
+"""
+from __future__ import annotations
+
+import importlib.metadata
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import panto
+from panto import cli
+from panto.cli import EXIT_CODES, main, walk_parsers
+
+
+def test_version_comes_from_the_package_metadata(capsys):
+    assert panto.__version__ == importlib.metadata.version("panto")
+    assert main(["--version"]) == 0
+    assert capsys.readouterr().out.strip() == f"panto {panto.__version__}"
+
+
+def test_python_dash_m_panto_is_the_same_command_line():
+    done = subprocess.run([sys.executable, "-m", "panto", "--version"], capture_output=True,
+                          text=True, timeout=120)
+    assert done.returncode == 0 and done.stdout.strip() == f"panto {panto.__version__}"
+
+
+def test_help_documents_every_exit_code(capsys):
+    assert main(["--help"]) == 0
+    printed = capsys.readouterr().out
+    assert len(set(EXIT_CODES)) == len(EXIT_CODES) >= 5
+    for code, meaning in EXIT_CODES.items():
+        assert f"{code:>3}  {meaning}" in printed
+
+
+def test_every_option_and_argument_has_help_text():
+    parser, _ = cli._parser()
+    missing = [f"{p.prog} {a.option_strings or a.dest}" for p in walk_parsers(parser)
+               for a in p._actions if not (a.help or "").strip()]
+    assert not missing, missing
+
+
+def _fake_command(monkeypatch, body):
+    """Make ``panto parameters`` run `body(args)` instead of writing a parameter file."""
+    monkeypatch.setattr(cli, "run_parameters", body)
+
+
+@pytest.mark.parametrize("flags", [["-q"], ["--quiet"]])
+def test_quiet_after_the_subcommand_silences_progress_not_results(flags, monkeypatch, capsys):
+    from panto.console import progress, say
+
+    def body(args):
+        progress("step 1 of 3")
+        say("result 42")
+        return 0
+
+    _fake_command(monkeypatch, body)
+    assert main(["parameters", "--out", "x.json"]) == 0
+    assert "step 1 of 3" in capsys.readouterr().out
+    assert main(["parameters", "--out", "x.json", *flags]) == 0
+    printed = capsys.readouterr().out
+    assert "result 42" in printed and "step 1 of 3" not in printed
+    assert main(["-q", "parameters", "--out", "x.json", "-v"]) == 0  # both places at once
+    assert "step 1 of 3" not in capsys.readouterr().out
+
+
+def test_an_internal_error_is_one_line_with_code_3_and_the_traceback_on_request(monkeypatch,
+                                                                                capsys):
+    _fake_command(monkeypatch, lambda args: 1 / 0)
+    assert main(["parameters", "--out", "x.json"]) == 3
+    error = capsys.readouterr().err
+    assert len(error.strip().splitlines()) == 1 and "ZeroDivisionError" in error
+    assert "Traceback" not in error and "-v" in error
+    assert main(["parameters", "--out", "x.json", "-v"]) == 3
+    assert "Traceback" in capsys.readouterr().err
+
+
+def test_ctrl_c_keeps_what_was_recorded_and_exits_4(monkeypatch, tmp_path, capsys):
+    """A recording interrupted by Ctrl-C: one line, code 4, and the rows up to it are on disk,
+    marked aborted."""
+    from panto.rig.dataset import RunMetadata, read_dataset
+    from panto.rig.recorder import Recorder
+
+    def body(args):
+        with Recorder(tmp_path / "run", channels=["force"], units={"force": "N"}, required=(),
+                      metadata=RunMetadata(sample_rate=100.0, source="emulator")) as recorder:
+            for k in range(50):
+                recorder.append(k / 100.0, [float(k)])
+            raise KeyboardInterrupt
+
+    _fake_command(monkeypatch, body)
+    assert main(["parameters", "--out", "x.json"]) == 4
+    error = capsys.readouterr().err.strip()
+    assert len(error.splitlines()) == 1 and "Ctrl-C" in error and "Traceback" not in error
+    kept = read_dataset(tmp_path / "run", required=())
+    assert np.array_equal(kept["force"], np.arange(50.0))
+    assert kept.metadata.status.startswith("aborted")
+
+
+def test_a_closed_pipe_ends_quietly(tmp_path):
+    """``panto rig check RUN | head -0``: no traceback, the documented code."""
+    from panto.rig.dataset import Dataset, RunMetadata
+
+    t = np.arange(2000) / 500.0
+    path = Dataset(t, {f"c{k}": np.sin(t * k) for k in range(300)},
+                   {f"c{k}": "1" for k in range(300)},
+                   RunMetadata(sample_rate=500.0, source="emulator")).write(tmp_path / "r.csv")
+    child = subprocess.Popen([sys.executable, "-m", "panto", "rig", "check", str(path),
+                              "--any-channels"], stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    child.stdout.close()  # the reader is gone before the first line is written
+    error = child.stderr.read().decode()
+    assert child.wait(timeout=120) == 141 and error == ""
