@@ -107,15 +107,17 @@ class Catenary:
         self._steps += 1
         self.time = self._steps * self.time_step
 
-    def _load(self, force: float, x: float) -> tuple[np.ndarray, np.ndarray]:
+    def _load(self, force: float, x: float) -> tuple[list[int], list[float]]:
         if not math.isfinite(force):
             raise ValueError(f"contact force {force!r} is not finite")
         j, xi = self._locate(x)
-        nodes = (j, j + 1)
-        weights = (1.0 - xi, xi)
-        index = [2 * (node - 1) for node in nodes if 0 < node < self.mesh.elements]
-        value = [force * w for node, w in zip(nodes, weights) if 0 < node < self.mesh.elements]
-        return np.array(index, dtype=int), np.array(value)
+        elements = self.mesh.elements
+        index, value = [], []
+        for node, weight in ((j, 1.0 - xi), (j + 1, xi)):
+            if 0 < node < elements:  # the pinned end nodes take no load
+                index.append(2 * (node - 1))
+                value.append(force * weight)
+        return index, value
 
     def _locate(self, x: float) -> tuple[int, float]:
         if not (0.0 <= x <= self.length):
@@ -149,7 +151,11 @@ class Catenary:
 
     def support_uplift(self) -> np.ndarray:
         """Current uplift of the contact wire at every support (ends included) [m]."""
-        return self.contact_wire_displacement()[self.mesh.support_nodes]
+        nodes = self.mesh.support_nodes
+        moving = (nodes > 0) & (nodes < self.mesh.elements)  # the pinned ends stay at 0
+        uplift = np.zeros(len(nodes))
+        uplift[moving] = self._integrator.displacement[2 * (nodes[moving] - 1)]
+        return uplift
 
     def dropper_forces(self) -> np.ndarray:
         """Current dropper tensions k max(e, 0) [N], one per dropper (never negative)."""

@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 import pytest
+import scipy.sparse as sparse
 from scipy.sparse.linalg import spsolve
 
 from panto.catenary_cosim.catenary import Catenary
@@ -401,3 +402,90 @@ def test_mesh_and_time_step_refinement_reduce_the_error(reference_line):
                    for dt in (2e-3, 1e-3)]
     assert mesh_errors[1] < mesh_errors[0]
     assert step_errors[1] < step_errors[0]
+
+
+# --- the step against the textbook formulation -------------------------------------------------
+class _TextbookNewmark:
+    """The average-acceleration step written out as in the textbook, with a dense LU solve:
+    (K + 2/dt C + 4/dt^2 M) u' = f + M (4/dt^2 u + 4/dt v + a) + C (2/dt u + v)."""
+
+    def __init__(self, mesh, line, dt):
+        from scipy.linalg import lu_factor
+
+        self.dt, self.mass = dt, mesh.mass
+        self.damping = (line.rayleigh_alpha * sparse.diags(mesh.mass)
+                        + line.rayleigh_beta * mesh.stiffness_structure).tocsr()
+        matrix = (mesh.stiffness_linear() + 2 / dt * self.damping
+                  + 4 / dt**2 * sparse.diags(mesh.mass)).toarray()
+        self.factor = lu_factor(matrix)
+
+    def step(self, state, load):
+        from scipy.linalg import lu_solve
+
+        (u, v, a), dt = state, self.dt
+        rhs = (load + self.mass * (4 / dt**2 * u + 4 / dt * v + a)
+               + self.damping @ (2 / dt * u + v))
+        new = lu_solve(self.factor, rhs)
+        velocity = 2 / dt * (new - u) - v
+        return new, velocity, 2 / dt * (velocity - v) - a
+
+
+@pytest.mark.parametrize("compiled", [True, False], ids=["compiled", "numpy"])
+def test_each_step_equals_the_dense_textbook_step(reference_line, compiled, monkeypatch):
+    """Every step of the integrator, from its own current state, against a dense solve of the
+    textbook Newmark equations (droppers taut throughout, so the system is linear)."""
+    from panto.catenary_cosim import kernel
+
+    monkeypatch.setenv(kernel.SWITCH_VARIABLE, "1" if compiled else "0")
+    line = short_line(reference_line)
+    dt = 1e-3
+    catenary = Catenary(line, time_step=dt, element_length=1.0)
+    if compiled and kernel.load_library() is None:
+        pytest.skip("no C compiler: the compiled kernel is not available")
+    assert catenary._integrator.backend == ("compiled" if compiled else "numpy")
+    mesh = catenary.mesh
+    textbook = _TextbookNewmark(mesh, line, dt)
+    worst = {"displacement": 0.0, "velocity": 0.0, "acceleration": 0.0}
+    for i in range(300):
+        motion = catenary.motion()
+        state = (motion["displacement"], motion["velocity"], motion["acceleration"])
+        force, x = 50.0 * (1 + 0.5 * math.sin(0.05 * i)), 20.0 + 69.4 * (i + 1) * dt
+        index, value = catenary._load(force, x)
+        load = np.zeros(mesh.unknowns)
+        load[index] = value
+        expected = textbook.step(state, load)
+        catenary.advance(force, x)
+        assert catenary.dropper_forces().min() > 0.0
+        got = catenary.motion()
+        for name, reference in zip(worst, expected):
+            error = np.abs(got[name] - reference).max() / np.abs(reference).max()
+            worst[name] = max(worst[name], error)
+    assert worst["displacement"] < 1e-12
+    # v and a are differences of displacements (divided by dt): a few more digits cancel
+    assert worst["velocity"] < 1e-10 and worst["acceleration"] < 1e-8
+
+
+def test_compiled_and_numpy_steps_agree_with_slack_droppers(reference_line, monkeypatch):
+    """The two implementations of the step over 400 steps in which droppers go slack and taut
+    again: the same motion, forces and energies to round-off."""
+    from panto.catenary_cosim import kernel
+
+    if kernel.load_library() is None:
+        pytest.skip("no C compiler: the compiled kernel is not available")
+    runs = []
+    for switch in ("1", "0"):
+        monkeypatch.setenv(kernel.SWITCH_VARIABLE, switch)
+        catenary = Catenary(short_line(reference_line), time_step=1e-3, element_length=0.5)
+        slack = []
+        _drive(catenary, lambda i: 300.0 * (1 + 0.5 * math.sin(0.04 * i)), 400, 30.0, 70.0,
+               lambda c: slack.append(np.count_nonzero(c.dropper_forces() == 0.0)))
+        runs.append((catenary._integrator.backend, max(slack), catenary.motion(),
+                     catenary.dropper_forces(), catenary.energy()))
+    (first, slack_a, motion_a, forces_a, energy_a), (second, slack_b, motion_b, forces_b,
+                                                      energy_b) = runs
+    assert (first, second) == ("compiled", "numpy") and slack_a >= 3 and slack_b >= 3
+    u = motion_b["displacement"]
+    assert np.abs(motion_a["displacement"] - u).max() < 1e-10 * np.abs(u).max()
+    np.testing.assert_allclose(forces_a, forces_b, rtol=0, atol=1e-8 * forces_b.max())
+    for key in ("kinetic", "potential", "dissipated", "work"):
+        assert energy_a[key] == pytest.approx(energy_b[key], rel=1e-9)
