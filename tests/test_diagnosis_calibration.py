@@ -76,6 +76,10 @@ def test_a_drifting_force_gain_is_unexplained():
     assert result.gap["significant"], lines
     assert result.gap["per_output"]["F_c"]["systematic_cost"] >= RELEVANCE
     assert result.verdict == "unexplained", lines
+    # the discovery library is searched; a time-varying gain has no term in it, and a term that
+    # does not gain on the withheld run is never reported
+    assert any("searching the discovery library" in line for line in lines)
+    assert result.discovery is None or result.discovery["gain"] > 0
 
 
 def test_systematic_cost_of_a_known_residual():

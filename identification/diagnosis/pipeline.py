@@ -142,6 +142,11 @@ class Diagnosis:
     adequacy: Mapping[str, Any] | None = None
     """The nominal beside a black box on training (:mod:`~panto.identification.structures.adequacy`),
     when :attr:`DiagnosisOptions.adequacy` asked for it."""
+    discovery: Mapping[str, Any] | None = None
+    """When the verdict is ``unexplained``: the best term of the discovery library
+    (:func:`~panto.identification.diagnosis.discovery.discover`) refitted in the nominal, with its
+    withheld-data gain, as a hypothesis (the verdict stays ``unexplained``); None otherwise or
+    when no term gains on the withheld run."""
 
     def gap_closed(self) -> dict[str, float]:
         """Per output: share of the validation residual energy removed by all accepted effects."""
@@ -189,6 +194,7 @@ class Diagnosis:
             "analysis": [a.to_dict() for a in self.analysis_before],
             "next_experiment": self.next_experiment(),
             "training_only": self.training_only(), "adequacy": self.adequacy,
+            "discovery": self.discovery,
             "wall_time": self.wall_time})
 
 
@@ -233,6 +239,10 @@ class DiagnosisOptions:
     its training fit beats the black box's on some output by the relevance floor: a nonlinear
     effect is not named for a difference a linear model explains. Off by default until judged on
     the independent benchmark families (issue 24)."""
+    discovery: bool = True
+    """When the verdict is ``unexplained``, search a library of candidate terms by sparse
+    regression on the training residual and report the best refitted term as a hypothesis
+    (:mod:`~panto.identification.diagnosis.discovery`)."""
 
     def __post_init__(self) -> None:
         unknown = [c for c in self.candidates if c not in EFFECTS]
@@ -302,6 +312,10 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
     where = where_summary(analysis_before, validation)
     summary = _summary(verdict, accepted, fit_before, fit_after, where, remaining_gap) + \
         _training_only_text(_training_only(rounds, accepted))
+    hypothesis = _discovery(model, train, validation, executor, progress) \
+        if verdict == "unexplained" and options.discovery else None
+    if hypothesis is not None:
+        summary += f" Hypothesis (discovery, not a verdict): {hypothesis['summary']}"
     say(f"diagnose: verdict {verdict}: {summary}")
     return Diagnosis(
         verdict, tuple(accepted), nominal.name, validation.output_names, fit_before, fit_after,
@@ -309,7 +323,7 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
         where, tuple(rounds), tuple(steps), summary, time.perf_counter() - started,
         tuple(analysis_before), tuple(analysis_after),
         {"time": validation.time, "measured": validation.outputs, "before": before,
-         "after": current}, adequacy.to_dict() if adequacy else None)
+         "after": current}, adequacy.to_dict() if adequacy else None, hypothesis)
 
 
 def _check_runs(train: IdentificationData, validation: IdentificationData) -> None:
@@ -509,6 +523,38 @@ def _try(model: _Model, candidate: Mapping[str, Any], current: np.ndarray,
         f"validation +{trial.improvement:.2f} points (fold spread {trial.fold_spread:.2f}): "
         + ("accepted" if trial.accepted else "rejected (" + ", ".join(trial.failed) + ")"))
     return trial, new, simulated
+
+
+def _discovery(model: _Model, train: IdentificationData, validation: IdentificationData,
+               executor: Any, progress: Progress | None) -> dict[str, Any] | None:
+    """The discovery library's best term in the model (:attr:`DiagnosisOptions.discovery`)."""
+    from panto.identification.diagnosis.discovery import discover
+
+    if progress:
+        progress("diagnose: unexplained: searching the discovery library for a term")
+    try:
+        hypothesis = discover(model.structure, model.parameters, model.free, train, validation,
+                              executor=executor, progress=_indent(progress))
+    except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError) as error:
+        if progress:
+            progress(f"diagnose: discovery failed ({error})")
+        return None
+    if hypothesis is None:
+        return None
+    report = hypothesis.to_dict()
+    report.setdefault("summary", _hypothesis_text(report))
+    if progress:
+        progress("diagnose: hypothesis: " + report["summary"])
+    return report
+
+
+def _hypothesis_text(report: Mapping[str, Any]) -> str:
+    before, after = report.get("fit_validation_before"), report.get("fit_validation_after")
+    fits = f"; validation fit {before:.2f} -> {after:.2f} %" \
+        if isinstance(before, (int, float)) and isinstance(after, (int, float)) else ""
+    closed = report.get("gap_closed")
+    share = f", {100 * closed:.0f} % of the gap closed" if isinstance(closed, (int, float)) else ""
+    return f"{report.get('term', '?')} on {report.get('output', '?')}{fits}{share}"
 
 
 def _linear_explains(effect: str, trial: Mapping[str, Any],
