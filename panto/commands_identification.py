@@ -1,13 +1,16 @@
 """``panto identify``: fit a model structure to a rig run (thesis chapter 4).
 
 ``panto identify RUN --model physical-linear [--validate RUN] [--free a b] [--fix k_ph=50000]
-[--method lm|nsga2] [--multistart N] [--initial defaults|data] [--workers N] [--out DIR] [--json FILE] [--rate 50]
-[--start S --stop S] [--keep-unidentifiable]`` prints the progress, a table (parameter, value,
+[--method lm|nsga2] [--multistart N] [--initial auto|defaults|data] [--no-adequacy] [--workers N]
+[--out DIR] [--json FILE] [--rate 50] [--start S --stop S] [--keep-unidentifiable]`` prints the progress, a table (parameter, value,
 unit, std, 95 % interval, nominal, verdict) and the fits, and writes the parameter file, the result
 JSON, its markdown summary and the plot into ``--out``. With ``lm``, parameters the run cannot
 pin are fixed at their prior and the rest refitted, unless ``--keep-unidentifiable``; with
-``--initial data`` the fit is :func:`~panto.identification.estimation.global_fit.fit_global`
-(also from data-driven starts), its verdict printed and kept in ``result.json`` (``global_fit``).
+``--initial data`` (the default, ``auto``, for the structures of :data:`DATA_STARTS`) the fit is
+:func:`~panto.identification.estimation.global_fit.fit_global` (also from data-driven starts), its
+verdict printed and kept in ``result.json`` (``global_fit``), and the fit is set beside a black box
+of the structure's order (:mod:`~panto.identification.structures.adequacy`; ``--no-adequacy``
+skips it).
 
 The data are a rig run (the rig mapping eta, p -> F_c, y_cb when no columns are named) or any
 table with ``--inputs NAME=COLUMN ... --outputs NAME=COLUMN ...`` (``--sample-rate``,
@@ -72,13 +75,17 @@ def run_identify(args: argparse.Namespace) -> int:
         options["free"] = args.free
     if args.method == "lm":
         options.update(multistart=args.multistart, max_evaluations=args.max_evaluations)
-        if args.initial == "data" and args.model not in DATA_STARTS:
+        initial = args.initial if args.initial != "auto" else \
+            "data" if args.model in DATA_STARTS and not args.multistart else "defaults"
+        if initial == "data" and args.model not in DATA_STARTS:
             say(f"--initial data: {args.model} has no data-driven start (those: "
                 f"{', '.join(DATA_STARTS)}); fitting from the defaults")
-        elif args.initial == "data":
+        elif initial == "data":
             from panto.identification.estimation.global_fit import GlobalFitOptions
 
             options["global_fit"] = GlobalFitOptions()
+        if args.model in DATA_STARTS and args.adequacy:
+            options["adequacy"] = True
         if not args.model.startswith(("blackbox-", "collector-head")) and \
                 "global_fit" not in options:
             options["fix_unidentifiable"] = not args.keep_unidentifiable
@@ -98,6 +105,8 @@ def run_identify(args: argparse.Namespace) -> int:
     _print_result(result, validation)
     if "global_fit" in result.details:
         say(result.details["global_fit"]["verdict"])
+    if "adequacy" in result.details:
+        say("adequacy: " + result.details["adequacy"]["message"])
     if args.out and args.model == "collector-head":
         _write_collector_head(data, Path(args.out))
     elif args.out:
@@ -192,11 +201,16 @@ def register(add: Callable[..., argparse.ArgumentParser]) -> None:
     p.add_argument("--keep-unidentifiable", action="store_true",
                    help="lm: leave parameters the run cannot pin free (default: fix them at their "
                         "prior and refit, reported as 'fixed at prior')")
-    p.add_argument("--initial", default="defaults", choices=("defaults", "data"),
+    p.add_argument("--initial", default="auto", choices=("auto", "defaults", "data"),
                    help="lm: where the fit starts: the structure's defaults, or also from the "
                         "data's frequency response and perturbations (fit_global; "
                         f"{', '.join(DATA_STARTS)}), which prints whether the starts agree on "
-                        "a global optimum and keeps parameters the run cannot pin free")
+                        "a global optimum and keeps parameters the run cannot pin free; auto "
+                        "(default): data for those structures, defaults for the others")
+    p.add_argument("--no-adequacy", dest="adequacy", action="store_false",
+                   help=f"lm, {', '.join(DATA_STARTS)}: skip the comparison with a black box of "
+                        "the structure's order (adequacy: did the fit converge, can the "
+                        "structure express the data's linear dynamics)")
     p.add_argument("--workers", type=positive_int, default=1, help="processes for the evaluations")
     p.add_argument("--out", help="folder for parameters.json, result.json and fit.png")
     p.add_argument("--json", help="also write the result summary as JSON")
