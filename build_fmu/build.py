@@ -46,7 +46,7 @@ def derive_instantiation_token(spec: ModelSpec, variables: tuple[FmuVariable, ..
     """
     digest = hashlib.sha256()
     for part in (f"FMI {fmi_version}", spec.identifier, spec.description,
-                 repr(spec.linearised), repr(variables), spec.c_code,
+                 repr(spec.linearised), repr(variables), repr(spec.dependencies), spec.c_code,
                  *(f"{name}\n{text}" for name, text in
                    sorted(read_runtime_sources(fmi_version).items()))):
         digest.update(part.encode("utf-8"))

@@ -11,7 +11,7 @@ import math
 
 from panto.fmu_src.spec import ModelSpec
 
-from .variables import FmuVariable
+from .variables import FmuVariable, dependency_table_lines
 
 _KINDS = {
     "time": "CORE_VARIABLE_TIME",
@@ -23,6 +23,7 @@ _KINDS = {
     "operating_point": "CORE_VARIABLE_OPERATING_POINT",
     "solver_tolerance": "CORE_VARIABLE_SOLVER_TOLERANCE",
     "start_in_equilibrium": "CORE_VARIABLE_START_IN_EQUILIBRIUM",
+    "event_indicator": "CORE_VARIABLE_EVENT_INDICATOR",
 }
 
 
@@ -57,7 +58,9 @@ def _row(variable: FmuVariable) -> str:
     value_type = "CORE_TYPE_BOOLEAN" if variable.type == "Boolean" else "CORE_TYPE_REAL"
     return (f"    {{{_c_string(variable.name)}, {kind}, {value_type}, {variable.index}, "
             f"{format_c_double(variable.start)}, {format_c_double(variable.minimum)}, "
-            f"{format_c_double(variable.maximum)}}}, /* vr {variable.value_reference} */")
+            f"{format_c_double(variable.maximum)}, "
+            f"{format_c_double(variable.nominal if variable.nominal is not None else 1.0)}}}, "
+            f"/* vr {variable.value_reference} */")
 
 
 def write_model_config(spec: ModelSpec, variables: tuple[FmuVariable, ...], token: str) -> str:
@@ -93,10 +96,15 @@ def write_model_config(spec: ModelSpec, variables: tuple[FmuVariable, ...], toke
     lines += [
         f"#define MODEL_NUMBER_OF_VARIABLES {len(variables)}",
         "",
-        "/* name, kind, type, index, start, minimum, maximum; the value reference is the row */",
+        f"#define MODEL_NUMBER_OF_EVENT_INDICATORS {len(spec.active_event_indicators)}",
+        "",
+        "/* name, kind, type, index, start, minimum, maximum, nominal; the value reference is the "
+        "row */",
         "static const CoreVariable MODEL_VARIABLES[MODEL_NUMBER_OF_VARIABLES] = {",
         *(_row(variable) for variable in variables),
         "};",
+        "",
+        *dependency_table_lines(spec, variables),
         "",
         "#endif",
         "",

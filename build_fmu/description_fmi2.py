@@ -3,8 +3,10 @@
 Follows FMI 2.0.4 §2.2 (common), §3.3 (Model Exchange) and §4.3 (Co-Simulation): every
 variable carries a unit, parameters are tunable with start/min/max, states have
 ``initial="approx"`` (overwritten by the static equilibrium unless ``start_in_equilibrium`` is
-false), and ``<ModelStructure>`` lists outputs, derivatives and initial unknowns with their
-dependencies (1-based indices into ``<ModelVariables>``).
+false), inputs carry their admissible range and states their nominal, and ``<ModelStructure>``
+lists outputs, derivatives and initial unknowns with their exact dependencies and
+``dependenciesKind`` (1-based indices into ``<ModelVariables>``; from the symbolic Jacobian,
+:mod:`panto.fmu_src.sparsity`). ``numberOfEventIndicators`` counts the contact event indicators.
 """
 from __future__ import annotations
 
@@ -55,6 +57,8 @@ def _type_element(variable: FmuVariable) -> tuple[str, dict[str, str]]:
     if variable.start is not None:
         attributes["start"] = format_real(variable.start)
     attributes.update(format_bounds(variable))
+    if variable.nominal is not None:
+        attributes["nominal"] = format_real(variable.nominal)
     if variable.derivative_of is not None:
         attributes["derivative"] = str(variable.derivative_of + 1)
     return "Real", attributes
@@ -74,25 +78,27 @@ def _add_variables(root: ElementTree.Element, variables: tuple[FmuVariable, ...]
 
 
 def _unknown(parent: ElementTree.Element, variable: FmuVariable,
-             dependencies: tuple[FmuVariable, ...] | None) -> None:
+             dependencies: tuple[tuple[FmuVariable, str], ...] | None) -> None:
     attributes = {"index": str(variable.value_reference + 1)}
     if dependencies is not None:
-        attributes["dependencies"] = " ".join(
-            str(v.value_reference + 1) for v in sorted(dependencies,
-                                                        key=lambda v: v.value_reference))
+        attributes["dependencies"] = " ".join(str(v.value_reference + 1) for v, _ in dependencies)
+        attributes["dependenciesKind"] = " ".join(kind for _, kind in dependencies)
     ElementTree.SubElement(parent, "Unknown", attributes)
 
 
-def _add_model_structure(root: ElementTree.Element, variables: tuple[FmuVariable, ...]) -> None:
+def _add_model_structure(root: ElementTree.Element, spec: ModelSpec,
+                         variables: tuple[FmuVariable, ...]) -> None:
     structure = ElementTree.SubElement(root, "ModelStructure")
     outputs = ElementTree.SubElement(structure, "Outputs")
     for variable in variables:
         if variable.kind == "output":
-            _unknown(outputs, variable, list_dependencies(variable, variables))
+            _unknown(outputs, variable,
+                     list_dependencies(variable, variables, spec.dependencies))
     derivatives = ElementTree.SubElement(structure, "Derivatives")
     for variable in variables:
         if variable.kind == "derivative":
-            _unknown(derivatives, variable, list_dependencies(variable, variables))
+            _unknown(derivatives, variable,
+                     list_dependencies(variable, variables, spec.dependencies))
     initial = ElementTree.SubElement(structure, "InitialUnknowns")
     for variable in variables:  # ascending index, as FMI 2.0 requires
         if variable.kind in ("state", "derivative", "output"):
@@ -126,11 +132,11 @@ def write_model_description_fmi2(spec: ModelSpec, variables: tuple[FmuVariable, 
         "description": spec.description,
         "generationTool": GENERATION_TOOL,
         "variableNamingConvention": "flat",
-        "numberOfEventIndicators": "0"})
+        "numberOfEventIndicators": str(len(spec.active_event_indicators))})
     _add_interfaces(root, spec, source_files)
     add_unit_definitions(root, variables)
     add_log_categories(root)
     add_default_experiment(root, spec)
     _add_variables(root, variables)
-    _add_model_structure(root, variables)
+    _add_model_structure(root, spec, variables)
     return render_xml(root)

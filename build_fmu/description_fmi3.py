@@ -2,8 +2,9 @@
 
 Follows FMI 3.0.1 §2.4 (model description), §3.3 (Model Exchange), §4.3 (Co-Simulation) and
 §2.5.1 (build description): Float64/Boolean variables with units, ``derivative`` attributes
-on the state derivatives, ``<ModelStructure>`` with outputs, continuous-state derivatives and
-initial unknowns (dependencies as value references).
+on the state derivatives, ``<ModelStructure>`` with outputs, continuous-state derivatives
+(exact dependencies as value references, with ``dependenciesKind``), initial unknowns and event
+indicators.
 """
 from __future__ import annotations
 
@@ -54,6 +55,8 @@ def _variable_attributes(variable: FmuVariable) -> dict[str, str]:
     if variable.start is not None:
         attributes["start"] = format_real(variable.start)
     attributes.update(format_bounds(variable))
+    if variable.nominal is not None:
+        attributes["nominal"] = format_real(variable.nominal)
     if variable.derivative_of is not None:
         attributes["derivative"] = str(variable.derivative_of)
     return attributes
@@ -67,27 +70,32 @@ def _add_variables(root: ElementTree.Element, variables: tuple[FmuVariable, ...]
 
 
 def _unknown(parent: ElementTree.Element, tag: str, variable: FmuVariable,
-             dependencies: tuple[FmuVariable, ...] | None) -> None:
+             dependencies: tuple[tuple[FmuVariable, str], ...] | None) -> None:
     attributes = {"valueReference": str(variable.value_reference)}
     if dependencies is not None:
-        attributes["dependencies"] = " ".join(
-            str(v.value_reference) for v in sorted(dependencies,
-                                                    key=lambda v: v.value_reference))
+        attributes["dependencies"] = " ".join(str(v.value_reference) for v, _ in dependencies)
+        attributes["dependenciesKind"] = " ".join(kind for _, kind in dependencies)
     ElementTree.SubElement(parent, tag, attributes)
 
 
-def _add_model_structure(root: ElementTree.Element, variables: tuple[FmuVariable, ...]) -> None:
+def _add_model_structure(root: ElementTree.Element, spec: ModelSpec,
+                         variables: tuple[FmuVariable, ...]) -> None:
     structure = ElementTree.SubElement(root, "ModelStructure")
     for variable in variables:
         if variable.kind == "output":
-            _unknown(structure, "Output", variable, list_dependencies(variable, variables))
+            _unknown(structure, "Output", variable,
+                     list_dependencies(variable, variables, spec.dependencies))
     for variable in variables:
         if variable.kind == "derivative":
             _unknown(structure, "ContinuousStateDerivative", variable,
-                     list_dependencies(variable, variables))
+                     list_dependencies(variable, variables, spec.dependencies))
     for variable in variables:
         if variable.kind in ("state", "derivative", "output"):
             _unknown(structure, "InitialUnknown", variable, None)
+    for variable in variables:
+        if variable.kind == "event_indicator":
+            ElementTree.SubElement(structure, "EventIndicator",
+                                   {"valueReference": str(variable.value_reference)})
 
 
 def write_model_description_fmi3(spec: ModelSpec, variables: tuple[FmuVariable, ...],
@@ -120,7 +128,7 @@ def write_model_description_fmi3(spec: ModelSpec, variables: tuple[FmuVariable, 
     add_log_categories(root)
     add_default_experiment(root, spec)
     _add_variables(root, variables)
-    _add_model_structure(root, variables)
+    _add_model_structure(root, spec, variables)
     return render_xml(root)
 
 

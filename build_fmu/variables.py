@@ -4,6 +4,7 @@ The value reference of a variable is its row number, in this order::
 
     time | states x = [q; v] | their derivatives | inputs u | outputs y | parameters p
          | operating points u0 (linearised models only) | solver_tolerance | start_in_equilibrium
+         | event indicators z (models with events, not linearised)
 
 The runtime (``fmu_src/runtime/fmu_core.c``) reads the same table from the generated
 ``model_config.h``, so the two sides cannot disagree.
@@ -51,7 +52,8 @@ class FmuVariable:
         Row number in the table (FMI 2.0 index = value_reference + 1).
     kind : str
         ``"time"``, ``"state"``, ``"derivative"``, ``"input"``, ``"output"``, ``"parameter"``,
-        ``"operating_point"``, ``"solver_tolerance"`` or ``"start_in_equilibrium"``.
+        ``"operating_point"``, ``"solver_tolerance"``, ``"start_in_equilibrium"`` or
+        ``"event_indicator"``.
     index : int
         Position within the runtime vector of that kind (x, u, y, p, u0).
     type : str
@@ -68,6 +70,8 @@ class FmuVariable:
         Unit string (``None`` for Booleans).
     derivative_of : int or None
         For a state derivative, the value reference of its state.
+    nominal : float or None
+        FMI ``nominal`` (states; ``None``: no attribute, i.e. 1).
     """
 
     name: str
@@ -84,6 +88,7 @@ class FmuVariable:
     maximum: float = math.inf
     unit: str | None = None
     derivative_of: int | None = None
+    nominal: float | None = None
 
 
 def _check_spec(spec: ModelSpec) -> None:
@@ -109,7 +114,7 @@ def _state_rows(spec: ModelSpec, first: int) -> list[FmuVariable]:
             name=name, description=description, value_reference=first + i, kind="state",
             index=i, type="Real", causality="local", variability="continuous",
             initial="approx", start=0.0 if spec.linearised else float(state.start),
-            unit=state.unit))
+            unit=state.unit, nominal=state.nominal))
     return rows
 
 
@@ -128,7 +133,8 @@ def _signal_rows(spec: ModelSpec, first: int) -> list[FmuVariable]:
         rows.append(FmuVariable(
             name=signal.name, description=signal.description, value_reference=first + i,
             kind="input", index=i, type="Real", causality="input", variability="continuous",
-            initial=None, start=float(signal.start), unit=signal.unit))
+            initial=None, start=float(signal.start), minimum=float(signal.minimum),
+            maximum=float(signal.maximum), unit=signal.unit))
     first += len(rows)
     for i, signal in enumerate(spec.outputs):
         rows.append(FmuVariable(
@@ -164,7 +170,8 @@ def _runtime_rows(spec: ModelSpec, first: int) -> list[FmuVariable]:
                             "linearised",
                 value_reference=first + i, kind="operating_point", index=i, type="Real",
                 causality="parameter", variability="tunable", initial=None,
-                start=float(signal.start), unit=signal.unit))
+                start=float(signal.start), minimum=float(signal.minimum),
+                maximum=float(signal.maximum), unit=signal.unit))
     first += len(rows)
     rows.append(FmuVariable(
         name=SOLVER_TOLERANCE_NAME,
@@ -180,6 +187,13 @@ def _runtime_rows(spec: ModelSpec, first: int) -> list[FmuVariable]:
                     "and parameters; false: the state start values are used as they are",
         value_reference=first + 1, kind="start_in_equilibrium", index=0, type="Boolean",
         causality="parameter", variability="fixed", initial=None, start=1.0))
+    first += 2
+    for i, indicator in enumerate(spec.active_event_indicators):
+        rows.append(FmuVariable(
+            name=indicator.name, description=f"Event indicator: {indicator.description}",
+            value_reference=first + i, kind="event_indicator", index=i, type="Real",
+            causality="local", variability="continuous", initial="calculated", start=None,
+            unit=indicator.unit))
     return rows
 
 
@@ -221,12 +235,10 @@ def layout_variables(spec: ModelSpec) -> tuple[FmuVariable, ...]:
     return tuple(rows)
 
 
-def list_dependencies(variable: FmuVariable,
-                    variables: tuple[FmuVariable, ...]) -> tuple[FmuVariable, ...]:
-    """The knowns (states, inputs) an output or state derivative depends on.
-
-    ``der(q_i) = v_i`` depends on ``v_i`` only; accelerations and outputs are taken to depend
-    on every state and input (the runtime's directional derivatives give the exact values).
+def list_dependencies(variable: FmuVariable, variables: tuple[FmuVariable, ...],
+                      structure: tuple[tuple[str, ...], ...] | None = None,
+                      ) -> tuple[tuple[FmuVariable, str], ...]:
+    """The knowns (states, inputs) an output or state derivative depends on, with their kinds.
 
     Parameters
     ----------
@@ -234,12 +246,62 @@ def list_dependencies(variable: FmuVariable,
         An output or a state derivative.
     variables : tuple of FmuVariable
         The whole table.
+    structure : tuple of tuple of str, optional
+        The model's Jacobian structure (:attr:`panto.fmu_src.spec.ModelSpec.dependencies`):
+        rows state derivatives then outputs, entries states then inputs, each ``""`` or an
+        FMI ``dependenciesKind``. Without it ``der(q_i) = v_i`` depends on ``v_i`` only
+        (``"constant"``) and everything else on every state and input (``"dependent"``).
 
     Returns
     -------
-    tuple of FmuVariable
+    tuple of (FmuVariable, str)
+        The knowns in value-reference order, each with its ``dependenciesKind``.
     """
-    states = [v for v in variables if v.kind == "state"]
-    if variable.kind == "derivative" and variable.index < len(states) // 2:
-        return (states[len(states) // 2 + variable.index],)
-    return tuple(v for v in variables if v.kind in ("state", "input"))
+    knowns = [v for v in variables if v.kind in ("state", "input")]
+    n_states = sum(1 for v in knowns if v.kind == "state")
+    row = variable.index if variable.kind == "derivative" else n_states + variable.index
+    if structure is None:
+        if variable.kind == "derivative" and variable.index < n_states // 2:
+            kinds = ["constant" if k.kind == "state" and k.index == n_states // 2 + variable.index
+                     else "" for k in knowns]
+        else:
+            kinds = ["dependent"] * len(knowns)
+    else:
+        kinds = [structure[row][k.index if k.kind == "state" else n_states + k.index]
+                 for k in knowns]
+    return tuple((known, kind) for known, kind in zip(knowns, kinds) if kind)
+
+
+#: Codes of the dependency kinds in the C table (``CoreDependencyKind`` in ``fmu_core.h``).
+DEPENDENCY_CODES = {"": 0, "constant": 1, "fixed": 2, "tunable": 3, "discrete": 4, "dependent": 5}
+
+
+def dependency_table_lines(spec: ModelSpec, variables: tuple[FmuVariable, ...]) -> list[str]:
+    """C lines of ``MODEL_DEPENDENCIES``: the kind of each unknown's dependency on each known.
+
+    Row ``i`` is state derivative ``i`` (``i < NX``) or output ``i - NX``; column ``k`` is state
+    ``k`` or input ``k - NX``; the codes are :data:`DEPENDENCY_CODES`. The runtime answers
+    ``fmi3GetVariableDependencies`` from it, so it always agrees with ``<ModelStructure>``.
+
+    Parameters
+    ----------
+    spec : ModelSpec
+    variables : tuple of FmuVariable
+
+    Returns
+    -------
+    list of str
+    """
+    knowns = [v for v in variables if v.kind in ("state", "input")]
+    unknowns = ([v for v in variables if v.kind == "derivative"]
+                + [v for v in variables if v.kind == "output"])
+    lines = ["/* dependency kinds: rows der(x) then y, columns x then u (0: none) */",
+             f"static const unsigned char MODEL_DEPENDENCIES[{max(1, len(unknowns) * len(knowns))}]"
+             " = {"]
+    for unknown in unknowns:
+        kinds = dict((known.value_reference, kind) for known, kind in
+                     list_dependencies(unknown, variables, spec.dependencies))
+        codes = [str(DEPENDENCY_CODES[kinds.get(k.value_reference, "")]) for k in knowns]
+        lines.append(f"    {', '.join(codes)}, /* {unknown.name} */")
+    lines.append("};")
+    return lines

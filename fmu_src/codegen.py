@@ -157,13 +157,16 @@ def _check_parameters_function(model: MechanicalModel) -> str:
     return "\n".join(lines)
 
 
-def generate_c_code(model: MechanicalModel) -> str:
+def generate_c_code(model: MechanicalModel, *, event_indicators: tuple = ()) -> str:
     """The complete C translation unit of ``model`` (see ``runtime/model_interface.h``).
 
     Parameters
     ----------
     model : MechanicalModel
         The symbolic model.
+    event_indicators : tuple of sympy.Expr
+        Event indicators z(q, v, u) computed by ``model_event_indicators`` (keyword only);
+        an importer locates the instants where one changes sign.
 
     Returns
     -------
@@ -195,6 +198,9 @@ def generate_c_code(model: MechanicalModel) -> str:
         _function(model, f"model_outputs_jacobian({args}, double *dy_dq, double *dy_dv, double *dy_du, char *message)",
                   _matrix_targets("dy_dq", dydq) + _matrix_targets("dy_dv", dydv) + _matrix_targets("dy_du", dydu),
                   v=True, u=True),
+        _function(model, f"model_event_indicators({args}, double *z, char *message)",
+                  [(f"z[{i}]", sp.sympify(e)) for i, e in enumerate(event_indicators)],
+                  v=True, u=True).replace("    return 0;", "    (void)z;\n    return 0;"),
         _initial_guess_function(model),
     ]
     return "\n".join(parts)

@@ -10,17 +10,20 @@ Examples
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
+import sympy as sp
 
 from panto.fmu_src.codegen import generate_c_code
 from panto.fmu_src.numeric import LinearisedModel, ModelEvaluationError, NumericModel
 from panto.fmu_src.oscillators import derive_oscillator
 from panto.fmu_src.pantograph import PHI1_SEARCH_RANGE, derive_pantograph
 from panto.fmu_src.parameters import ParameterError, ParameterSet
-from panto.fmu_src.spec import ModelSpec
+from panto.fmu_src.sparsity import jacobian_structure
+from panto.fmu_src.spec import ModelSpec, Variable
 from panto.fmu_src.symbolic import MechanicalModel
 
 #: Models by name, each with the function that derives it.
@@ -32,6 +35,27 @@ DERIVATIONS = {
 MODEL_NAMES = tuple(DERIVATIONS)
 #: The FMUs that ``panto build-fmu`` builds (each as FMI 2.0 and FMI 3.0).
 FMU_NAMES = ("Pantograph", "PantographLinear", "TwoMass", "ThreeMass")
+
+#: Admissible input ranges (minimum, maximum) declared by the FMUs; the setters refuse values
+#: outside. Bellow pressure: 0 bar to the 10 bar the train's supply provides (thesis section
+#: 2.1). Pantograph eta: heights above the frame hinge, from 0 (the head cannot go below it) to
+#: 10 m (no pantograph reaches that far); the reach of the tunable geometry is checked at the
+#: equilibrium (default geometry: cross bar 0.55 m to 3.24 m). Oscillators: eta within 100 m of
+#: any admissible relaxed height y_0 (itself in [-100, 100] m).
+INPUT_RANGES = {
+    "Pantograph": {"eta": (0.0, 10.0), "p": (0.0, 10.0)},
+    "TwoMass": {"eta": (-200.0, 200.0), "p": (0.0, 10.0)},
+    "ThreeMass": {"eta": (-200.0, 200.0), "p": (0.0, 10.0)},
+}
+#: State nominals: for a coordinate the power of ten nearest its default static equilibrium
+#: (Pantograph at eta = 2 m, p = 4 bar; oscillators at eta = y_0 = 0), for a velocity ten times
+#: that per second (the lowest natural angular frequencies are 16-20 rad/s), at most 1.
+STATE_NOMINALS = {
+    "Pantograph": {"phi1": 1.0, "delta": 1e-3, "xi": 1.0, "dphi1": 1.0, "ddelta": 1e-2,
+                   "dxi": 1.0},
+    "TwoMass": {"x1": 1e-2, "x2": 1e-3, "v1": 1e-1, "v2": 1e-2},
+    "ThreeMass": {"x1": 1e-2, "x2": 1e-2, "x3": 1e-3, "v1": 1e-1, "v2": 1e-1, "v3": 1e-2},
+}
 
 
 def symbolic_model(name: str) -> MechanicalModel:
@@ -102,27 +126,50 @@ def model_spec(name: str) -> ModelSpec:
                        "operating point (eta0, p0) (thesis section 2.4)")
     else:
         description = model.description
+    ranges, nominals = INPUT_RANGES[model.name], STATE_NOMINALS[model.name]
+
+    def state(variable: Variable) -> Variable:
+        return replace(variable, nominal=nominals[variable.name])
+
     return ModelSpec(
         identifier=name, description=description,
-        coordinates=tuple(_distinct_from_outputs(c, model) for c in model.coordinates),
-        velocities=model.velocities, inputs=model.inputs, outputs=model.outputs,
-        parameters=model.parameters, c_code=_c_code(model.name), linearised=linearised,
+        coordinates=tuple(_distinct_from_outputs(state(c), model) for c in model.coordinates),
+        velocities=tuple(state(v) for v in model.velocities),
+        inputs=tuple(replace(u, minimum=ranges[u.name][0], maximum=ranges[u.name][1])
+                     for u in model.inputs),
+        outputs=model.outputs, parameters=model.parameters, c_code=_c_code(model.name),
+        linearised=linearised, dependencies=jacobian_structure(model, linearised=linearised),
+        event_indicators=CONTACT_EVENT_INDICATORS,
     )
+
+
+#: The event indicator of every model: the contact gap (head height minus eta) while the contact
+#: is unilateral, so that Model Exchange importers locate contact loss and re-contact; 1 (no
+#: event) while it is bilateral.
+CONTACT_EVENT_INDICATORS = (Variable("contact_gap", "m", "head height minus eta while the "
+                                     "contact is unilateral (zero at contact loss and "
+                                     "re-contact), 1 while it is bilateral"),)
+
+
+def contact_gap(model: MechanicalModel) -> sp.Expr:
+    """The contact event indicator: head (last coordinate) minus eta if unilateral, else 1."""
+    unilateral = sp.Symbol("unilateral_contact", real=True)
+    head, eta = model.q[-1], sp.Symbol("eta", real=True)
+    return sp.Piecewise((head - eta, unilateral > sp.Rational(1, 2)), (1, True))
 
 
 def _distinct_from_outputs(variable, model: MechanicalModel):
     """FMI variables need unique names: a coordinate that is also an output (the pantograph's
     head height ``xi``) is exposed as the state ``<name>_state``; the output keeps the name."""
     if any(o.name == variable.name for o in model.outputs):
-        from dataclasses import replace
-
         return replace(variable, name=f"{variable.name}_state")
     return variable
 
 
 @lru_cache(maxsize=None)
 def _c_code(name: str) -> str:
-    return generate_c_code(symbolic_model(name))
+    model = symbolic_model(name)
+    return generate_c_code(model, event_indicators=(contact_gap(model),))
 
 
 class Model:

@@ -29,12 +29,21 @@ class Variable:
     start : float
         Start value (inputs: the value used for the initial equilibrium; states: the default
         initial value when the FMU is told not to start in equilibrium).
+    minimum, maximum : float
+        Admissible range in ``unit`` (inputs: values outside are refused by the FMU's setters;
+        infinite: no bound).
+    nominal : float or None
+        Typical magnitude in ``unit`` (states: the FMI ``nominal`` that scales an importer's
+        absolute tolerance; ``None``: 1).
     """
 
     name: str
     unit: str
     description: str
     start: float = 0.0
+    minimum: float = float("-inf")
+    maximum: float = float("inf")
+    nominal: float | None = None
 
 
 @dataclass(frozen=True)
@@ -63,6 +72,14 @@ class ModelSpec:
     The state vector is ``[coordinates..., velocities...]``; ``velocities[i]`` is the time
     derivative of ``coordinates[i]``. ``c_code`` is a complete C translation unit implementing
     ``model_interface.h`` with the variables in exactly this order.
+
+    ``dependencies`` is the structure of the Jacobian of ``[dx/dt; y]`` with respect to
+    ``[x; u]``: one row per state derivative then per output, one entry per state then per
+    input, each ``""`` (no dependency) or an FMI ``dependenciesKind`` (``"constant"``,
+    ``"tunable"``, ``"dependent"``); ``None`` declares every output and acceleration dependent
+    on every state and input. ``event_indicators`` names the indicators that ``c_code``
+    computes in ``model_event_indicators`` (see ``runtime/model_interface.h``); they are
+    offered to Model Exchange importers unless the spec is linearised.
     """
 
     identifier: str
@@ -75,8 +92,15 @@ class ModelSpec:
     c_code: str
     linearised: bool = False
     extra: dict = field(default_factory=dict, compare=False)
+    dependencies: tuple[tuple[str, ...], ...] | None = None
+    event_indicators: tuple[Variable, ...] = ()
 
     @property
     def states(self) -> tuple[Variable, ...]:
         """Coordinates followed by velocities (the FMI continuous states)."""
         return self.coordinates + self.velocities
+
+    @property
+    def active_event_indicators(self) -> tuple[Variable, ...]:
+        """The event indicators the FMU declares (none for a linearised model: no switching)."""
+        return () if self.linearised else self.event_indicators

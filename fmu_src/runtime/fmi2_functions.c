@@ -5,7 +5,10 @@
  * fmi2Error with a message through the importer's logger and changes nothing. A failed
  * computation (the model refuses its parameters, the linkage cannot close, the integrator gives
  * up) also moves the instance to the error state, from which fmi2Reset, fmi2SetFMUstate,
- * fmi2Terminate and fmi2FreeInstance lead out.
+ * fmi2Terminate and fmi2FreeInstance lead out. No call returns fmi2OK with a value that is not a
+ * finite number (derivatives, outputs, states, event indicators, directional derivatives are
+ * checked); a step that cannot advance the time and a tolerance below 1e-15 are refused, and
+ * serialised FMU states carry a checksum.
  */
 #include <math.h>
 #include <string.h>
@@ -108,15 +111,19 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined,
                                fmi2Boolean stopTimeDefined, fmi2Real stopTime) {
     CoreInstance *s = enter(c, "fmi2SetupExperiment", CORE_MODE_INSTANTIATED);
     if (s == NULL) return fmi2Error;
-    if (!isfinite(startTime) || (toleranceDefined && !(tolerance > 0.0 && tolerance < 1.0)) ||
-        (stopTimeDefined && !(stopTime >= startTime))) {
+    CoreStatus status = CORE_OK;
+    if (toleranceDefined) {
+        status = core_check_tolerance(s, "fmi2SetupExperiment", tolerance);
+        if (status == CORE_ERROR) return fmi2Error;
+    }
+    if (!isfinite(startTime) || (stopTimeDefined && !(stopTime >= startTime))) {
         core_log_error(s, "fmi2SetupExperiment: invalid arguments (startTime = %g, tolerance = "
                        "%g, stopTime = %g)", startTime, tolerance, stopTime);
         return fmi2Error;
     }
     s->time = startTime;
     s->experiment_tolerance = toleranceDefined ? tolerance : 0.0;
-    return fmi2OK;
+    return (fmi2Status)status;
 }
 
 fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
@@ -307,7 +314,8 @@ fmi2Status fmi2EnterEventMode(fmi2Component c) {
 fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *eventInfo) {
     CoreInstance *s = enter_model_exchange(c, "fmi2NewDiscreteStates", CORE_MODE_EVENT);
     if (s == NULL || eventInfo == NULL) return fmi2Error;
-    /* no discrete states, no time or state events */
+    /* no discrete states and no time events; at a state event (contact loss or re-contact, see
+     * fmi2GetEventIndicators) nothing changes: the contact force switches on the continuous gap */
     eventInfo->newDiscreteStatesNeeded = fmi2False;
     eventInfo->terminateSimulation = fmi2False;
     eventInfo->nominalsOfContinuousStatesChanged = fmi2False;
@@ -379,8 +387,12 @@ fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real derivatives[], size_t nx
 
 fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real eventIndicators[], size_t ni) {
     CoreInstance *s = enter_model_exchange(c, "fmi2GetEventIndicators", CORE_MODES_ANY);
-    if (s == NULL || !check_count(s, "fmi2GetEventIndicators", ni, 0, eventIndicators)) {
+    if (s == NULL || !check_count(s, "fmi2GetEventIndicators", ni,
+                                  (size_t)core_number_of_event_indicators(), eventIndicators)) {
         return fmi2Error;
+    }
+    if (core_event_indicators(s, "fmi2GetEventIndicators", eventIndicators) != CORE_OK) {
+        return (fmi2Status)core_fail(s);
     }
     return fmi2OK;
 }
@@ -391,7 +403,10 @@ fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[], size_t nx) {
         return fmi2Error;
     }
     const double *state;
-    if (core_effective_state(s, &state) != CORE_OK) return (fmi2Status)core_fail(s);
+    if (core_effective_state(s, &state) != CORE_OK ||
+        !core_check_finite(s, "fmi2GetContinuousStates", CORE_VARIABLE_STATE, state, nx)) {
+        return (fmi2Status)core_fail(s);
+    }
     memcpy(x, state, nx * sizeof(double));
     return fmi2OK;
 }
@@ -403,7 +418,7 @@ fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real x_nominal
         !check_count(s, "fmi2GetNominalsOfContinuousStates", nx, (size_t)s->nx, x_nominal)) {
         return fmi2Error;
     }
-    for (size_t i = 0; i < nx; i++) x_nominal[i] = 1.0;
+    core_state_nominals(x_nominal);
     return fmi2OK;
 }
 
@@ -449,12 +464,7 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
     CoreInstance *s = enter_co_simulation(c, "fmi2DoStep", CORE_MODE_STEP);
     if (s == NULL) return fmi2Error;
     const double t = currentCommunicationPoint, h = communicationStepSize;
-    if (!isfinite(t) || !isfinite(h) || h < 0.0 ||
-        fabs(t - s->time) > 1e-9 * fmax(1.0, fabs(t))) {
-        core_log_error(s, "fmi2DoStep: invalid step from t = %.17g of size %g (the FMU is at "
-                       "t = %.17g)", t, h, s->time);
-        return fmi2Error;
-    }
+    if (core_check_step(s, "fmi2DoStep", t, h) != CORE_OK) return fmi2Error;
     s->time = t;
     s->last_step_status = core_do_step(s, t, h);
     if (s->last_step_status != CORE_OK) return (fmi2Status)core_fail(s);

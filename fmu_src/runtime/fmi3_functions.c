@@ -100,8 +100,12 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean tolera
                                        fmi3Boolean stopTimeDefined, fmi3Float64 stopTime) {
     CoreInstance *s = enter(instance, "fmi3EnterInitializationMode", CORE_MODE_INSTANTIATED);
     if (s == NULL) return fmi3Error;
-    if (!isfinite(startTime) || (toleranceDefined && !(tolerance > 0.0 && tolerance < 1.0)) ||
-        (stopTimeDefined && !(stopTime >= startTime))) {
+    CoreStatus status = CORE_OK;
+    if (toleranceDefined) {
+        status = core_check_tolerance(s, "fmi3EnterInitializationMode", tolerance);
+        if (status == CORE_ERROR) return fmi3Error;
+    }
+    if (!isfinite(startTime) || (stopTimeDefined && !(stopTime >= startTime))) {
         core_log_error(s, "fmi3EnterInitializationMode: invalid arguments (startTime = %g, "
                        "tolerance = %g, stopTime = %g)", startTime, tolerance, stopTime);
         return fmi3Error;
@@ -110,7 +114,7 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean tolera
     s->experiment_tolerance = toleranceDefined ? tolerance : 0.0;
     core_set_mode(s, CORE_MODE_INITIALIZATION);
     core_touch(s);
-    return fmi3OK;
+    return (fmi3Status)status;
 }
 
 fmi3Status fmi3ExitInitializationMode(fmi3Instance instance) {
@@ -209,7 +213,7 @@ fmi3Status fmi3SetBoolean(fmi3Instance instance, const fmi3ValueReference valueR
                                         buffer);
 }
 
-/* ---- events (there are none: every update is trivial) ---------------------------------- */
+/* ---- events: contact event indicators, but no discrete states (every update is trivial) - */
 
 fmi3Status fmi3EvaluateDiscreteStates(fmi3Instance instance) {
     CoreInstance *s = enter(instance, "fmi3EvaluateDiscreteStates", ANY);
@@ -304,9 +308,12 @@ fmi3Status fmi3GetEventIndicators(fmi3Instance instance, fmi3Float64 eventIndica
                                   size_t nEventIndicators) {
     CoreInstance *s = enter_interface(instance, "fmi3GetEventIndicators", ANY,
                                       CORE_MODEL_EXCHANGE);
-    if (s == NULL ||
-        !check_count(s, "fmi3GetEventIndicators", nEventIndicators, 0, eventIndicators)) {
+    if (s == NULL || !check_count(s, "fmi3GetEventIndicators", nEventIndicators,
+                                  (size_t)core_number_of_event_indicators(), eventIndicators)) {
         return fmi3Error;
+    }
+    if (core_event_indicators(s, "fmi3GetEventIndicators", eventIndicators) != CORE_OK) {
+        return (fmi3Status)core_fail(s);
     }
     return fmi3OK;
 }
@@ -320,7 +327,11 @@ fmi3Status fmi3GetContinuousStates(fmi3Instance instance, fmi3Float64 continuous
         return fmi3Error;
     }
     const double *x;
-    if (core_effective_state(s, &x) != CORE_OK) return (fmi3Status)core_fail(s);
+    if (core_effective_state(s, &x) != CORE_OK ||
+        !core_check_finite(s, "fmi3GetContinuousStates", CORE_VARIABLE_STATE, x,
+                           nContinuousStates)) {
+        return (fmi3Status)core_fail(s);
+    }
     memcpy(continuousStates, x, nContinuousStates * sizeof(double));
     return fmi3OK;
 }
@@ -333,14 +344,14 @@ fmi3Status fmi3GetNominalsOfContinuousStates(fmi3Instance instance, fmi3Float64 
                                   (size_t)s->nx, nominals)) {
         return fmi3Error;
     }
-    for (size_t i = 0; i < nContinuousStates; i++) nominals[i] = 1.0;
+    core_state_nominals(nominals);
     return fmi3OK;
 }
 
 fmi3Status fmi3GetNumberOfEventIndicators(fmi3Instance instance, size_t *nEventIndicators) {
     CoreInstance *s = enter(instance, "fmi3GetNumberOfEventIndicators", ANY);
     if (s == NULL || nEventIndicators == NULL) return fmi3Error;
-    *nEventIndicators = 0;
+    *nEventIndicators = (size_t)core_number_of_event_indicators();
     return fmi3OK;
 }
 
@@ -380,12 +391,7 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
                                       CORE_CO_SIMULATION);
     if (s == NULL) return fmi3Error;
     const double t = currentCommunicationPoint, h = communicationStepSize;
-    if (!isfinite(t) || !isfinite(h) || h < 0.0 ||
-        fabs(t - s->time) > 1e-9 * fmax(1.0, fabs(t))) {
-        core_log_error(s, "fmi3DoStep: invalid step from t = %.17g of size %g (the FMU is at "
-                       "t = %.17g)", t, h, s->time);
-        return fmi3Error;
-    }
+    if (core_check_step(s, "fmi3DoStep", t, h) != CORE_OK) return fmi3Error;
     s->time = t;
     s->last_step_status = core_do_step(s, t, h);
     if (eventHandlingNeeded != NULL) *eventHandlingNeeded = false;

@@ -6,13 +6,21 @@
 
 /* ---- variable dependencies (as declared in <ModelStructure>) --------------------------- */
 
-/* der(q_i) depends on v_i; accelerations and outputs on every state and input. */
+/* Row of the dependency table for an unknown (state derivative, output), -1 for anything else. */
+static int dependency_row(const CoreInstance *s, const CoreVariable *v) {
+    if (v->kind == CORE_VARIABLE_DERIVATIVE) return v->index;
+    if (v->kind == CORE_VARIABLE_OUTPUT) return s->nx + v->index;
+    return -1;
+}
+
+/* The knowns an unknown depends on, as declared in <ModelStructure> (same generated table). */
 static size_t count_dependencies(const CoreInstance *s, const CoreVariable *v) {
-    if (v->kind == CORE_VARIABLE_DERIVATIVE && v->index < s->nq) return 1;
-    if (v->kind == CORE_VARIABLE_DERIVATIVE || v->kind == CORE_VARIABLE_OUTPUT) {
-        return (size_t)(s->nx + s->nu);
+    const int row = dependency_row(s, v);
+    size_t count = 0;
+    for (int column = 0; row >= 0 && column < s->nx + s->nu; column++) {
+        count += core_dependency_kind(s, row, column) != 0;
     }
-    return 0;
+    return count;
 }
 
 fmi3Status fmi3GetNumberOfVariableDependencies(fmi3Instance instance,
@@ -52,14 +60,17 @@ fmi3Status fmi3GetVariableDependencies(fmi3Instance instance, fmi3ValueReference
                    dependencyKinds == NULL))) {
         return fmi3Error;
     }
-    for (size_t i = 0; i < n; i++) {
-        int column = (int)i;
-        if (v->kind == CORE_VARIABLE_DERIVATIVE && v->index < s->nq) column = s->nq + v->index;
+    const int row = dependency_row(s, v);
+    size_t i = 0;
+    for (int column = 0; row >= 0 && column < s->nx + s->nu; column++) {
+        const int kind = core_dependency_kind(s, row, column);
+        if (kind == 0) continue;
         independents[i] = column < s->nx ? known_reference(CORE_VARIABLE_STATE, column)
                                          : known_reference(CORE_VARIABLE_INPUT, column - s->nx);
         elementIndicesOfDependent[i] = 0;
         elementIndicesOfIndependents[i] = 0;
-        dependencyKinds[i] = fmi3Dependent;
+        dependencyKinds[i] = (fmi3DependencyKind)kind;
+        i++;
     }
     return fmi3OK;
 }

@@ -31,6 +31,99 @@ const CoreVariable *core_find_variable(const CoreInstance *instance, const char 
     return &MODEL_VARIABLES[value_reference];
 }
 
+const char *core_variable_name(CoreVariableKind kind, int index) {
+    for (int i = 0; i < MODEL_NUMBER_OF_VARIABLES; i++) {
+        if (MODEL_VARIABLES[i].kind == kind && MODEL_VARIABLES[i].index == index) {
+            return MODEL_VARIABLES[i].name;
+        }
+    }
+    return "?";
+}
+
+int core_check_finite(const CoreInstance *instance, const char *function, CoreVariableKind kind,
+                      const double values[], size_t n) {
+    for (size_t i = 0; i < n; i++) {
+        if (isfinite(values[i])) continue;
+        core_log_error(instance, "%s: %s = %g is not a finite number at t = %g (the states, "
+                       "inputs or parameters lie outside the range where model %s can be "
+                       "evaluated)", function, core_variable_name(kind, (int)i), values[i],
+                       instance->time, MODEL_IDENTIFIER);
+        return 0;
+    }
+    return 1;
+}
+
+int core_number_of_event_indicators(void) { return MODEL_NUMBER_OF_EVENT_INDICATORS; }
+
+CoreStatus core_event_indicators(CoreInstance *s, const char *function, double z[]) {
+#if MODEL_NUMBER_OF_EVENT_INDICATORS > 0
+    const double *x;
+    if (core_prepare(s) != CORE_OK || core_effective_state(s, &x) != CORE_OK) return CORE_ERROR;
+    s->model_message[0] = '\0';
+    if (model_event_indicators(s->p, x, x + s->nq, s->u, z, s->model_message) != 0) {
+        s->model_message[MODEL_MESSAGE_LENGTH - 1] = '\0';
+        core_log_error(s, "%s: model %s cannot compute its event indicators at t = %g: %s",
+                       function, MODEL_IDENTIFIER, s->time, s->model_message);
+        return CORE_ERROR;
+    }
+    if (!core_check_finite(s, function, CORE_VARIABLE_EVENT_INDICATOR, z,
+                           MODEL_NUMBER_OF_EVENT_INDICATORS)) {
+        return CORE_ERROR;
+    }
+#else
+    (void)s;
+    (void)function;
+    (void)z;
+#endif
+    return CORE_OK;
+}
+
+void core_state_nominals(double nominals[]) {
+    for (int i = 0; i < MODEL_NUMBER_OF_VARIABLES; i++) {
+        const CoreVariable *v = &MODEL_VARIABLES[i];
+        if (v->kind == CORE_VARIABLE_STATE) nominals[v->index] = v->nominal;
+    }
+}
+
+int core_dependency_kind(const CoreInstance *instance, int row, int column) {
+    return MODEL_DEPENDENCIES[row * (instance->nx + instance->nu) + column];
+}
+
+CoreStatus core_check_tolerance(const CoreInstance *instance, const char *function,
+                                double tolerance) {
+    if (!(tolerance >= CORE_SMALLEST_TOLERANCE && tolerance < 1.0)) {
+        core_log_error(instance, "%s: tolerance = %g is refused: it must lie in [%g, 1) (below, "
+                       "double precision cannot honour it)", function, tolerance,
+                       CORE_SMALLEST_TOLERANCE);
+        return CORE_ERROR;
+    }
+    if (tolerance < CORE_MINIMUM_TOLERANCE) {
+        core_log(instance, CORE_WARNING, "logStatusWarning", "%s: tolerance = %g is below %g, "
+                 "the smallest the co-simulation integrator honours; it uses %g", function,
+                 tolerance, CORE_MINIMUM_TOLERANCE, CORE_MINIMUM_TOLERANCE);
+        return CORE_WARNING;
+    }
+    return CORE_OK;
+}
+
+CoreStatus core_check_step(const CoreInstance *instance, const char *function,
+                           double current_time, double step) {
+    const char *problem = NULL;
+    if (!isfinite(current_time) || !isfinite(step)) problem = "not a finite number";
+    else if (step < 0.0) problem = "a negative step";
+    else if (fabs(current_time - instance->time) > 1e-9 * fmax(1.0, fabs(current_time))) {
+        problem = "not from the FMU's time";
+    } else if (step > 0.0 && !(current_time + step > current_time)) {
+        problem = "too small to advance the time in double precision";
+    } else if (!isfinite(current_time + step)) {
+        problem = "ending at a time that is not a finite number";
+    }
+    if (problem == NULL) return CORE_OK;
+    core_log_error(instance, "%s: the step from t = %.17g of size %.17g is refused: %s (the FMU "
+                   "is at t = %.17g)", function, current_time, step, problem, instance->time);
+    return CORE_ERROR;
+}
+
 static int count_kind(CoreVariableKind kind) {
     int count = 0;
     for (int i = 0; i < MODEL_NUMBER_OF_VARIABLES; i++) {
@@ -47,7 +140,8 @@ static int check_variable_table(const CoreInstance *instance) {
         count_kind(CORE_VARIABLE_INPUT) != MODEL_NU ||
         count_kind(CORE_VARIABLE_OUTPUT) != MODEL_NY ||
         count_kind(CORE_VARIABLE_PARAMETER) != MODEL_NP ||
-        count_kind(CORE_VARIABLE_OPERATING_POINT) != expected_operating_points) {
+        count_kind(CORE_VARIABLE_OPERATING_POINT) != expected_operating_points ||
+        count_kind(CORE_VARIABLE_EVENT_INDICATOR) != MODEL_NUMBER_OF_EVENT_INDICATORS) {
         core_log_error(instance,
                        "the variable table in model_config.h does not match model %s "
                        "(NQ = %d, NU = %d, NY = %d, NP = %d): rebuild the FMU",
@@ -355,16 +449,21 @@ static int needs_computation(const CoreVariable *v) {
 CoreStatus core_get_real(CoreInstance *instance, const char *function,
                          const unsigned int vr[], size_t n, double values[]) {
     if (!check_arrays(instance, function, n, vr, values)) return CORE_ERROR;
-    int compute = 0;
+    int compute = 0, indicators = 0;
     for (size_t i = 0; i < n; i++) {
         const CoreVariable *v = find_typed(instance, function, vr[i], CORE_TYPE_REAL);
         if (v == NULL) return CORE_ERROR;
         compute |= needs_computation(v);
+        indicators |= v->kind == CORE_VARIABLE_EVENT_INDICATOR;
     }
     const double *x = instance->x;
+    double z[MODEL_NUMBER_OF_EVENT_INDICATORS + 1] = {0.0};
     if (compute) {
         if (core_update_cache(instance) != CORE_OK) return core_fail(instance);
         if (core_effective_state(instance, &x) != CORE_OK) return core_fail(instance);
+    }
+    if (indicators && core_event_indicators(instance, function, z) != CORE_OK) {
+        return core_fail(instance);
     }
     for (size_t i = 0; i < n; i++) {
         const CoreVariable *v = &MODEL_VARIABLES[vr[i]];
@@ -382,6 +481,14 @@ CoreStatus core_get_real(CoreInstance *instance, const char *function,
             case CORE_VARIABLE_START_IN_EQUILIBRIUM:
                 values[i] = instance->start_in_equilibrium;
                 break;
+            case CORE_VARIABLE_EVENT_INDICATOR: values[i] = z[v->index]; break;
+        }
+        if (!isfinite(values[i])) { /* never an OK with a value that is not a number */
+            core_log_error(instance, "%s: '%s' (value reference %u) = %g is not a finite number "
+                           "at t = %g (the states, inputs or parameters lie outside the range "
+                           "where model %s can be evaluated)", function, v->name, vr[i],
+                           values[i], instance->time, MODEL_IDENTIFIER);
+            return core_fail(instance);
         }
     }
     return CORE_OK;

@@ -29,6 +29,13 @@
 
 #define CORE_LOG_LENGTH 2048 /* longest log message, including the model's message */
 
+/* Tolerances given by the importer (SetupExperiment / EnterInitializationMode): below
+ * CORE_SMALLEST_TOLERANCE (a few machine epsilons, which no double arithmetic can honour) or
+ * not in (0, 1) they are refused; between it and CORE_MINIMUM_TOLERANCE (the smallest
+ * solver_tolerance) they are accepted with a warning and the integrator uses the latter. */
+#define CORE_SMALLEST_TOLERANCE 1e-15
+#define CORE_MINIMUM_TOLERANCE 1e-12
+
 /* Same numbering as fmi2Status and fmi3Status. */
 typedef enum {
     CORE_OK = 0,
@@ -68,7 +75,8 @@ typedef enum {
     CORE_VARIABLE_PARAMETER,            /* p[index] (Real or Boolean) */
     CORE_VARIABLE_OPERATING_POINT,      /* u0[index], linearised models only */
     CORE_VARIABLE_SOLVER_TOLERANCE,     /* Real, tunable */
-    CORE_VARIABLE_START_IN_EQUILIBRIUM  /* Boolean, fixed */
+    CORE_VARIABLE_START_IN_EQUILIBRIUM, /* Boolean, fixed */
+    CORE_VARIABLE_EVENT_INDICATOR       /* z[index], computed */
 } CoreVariableKind;
 
 typedef enum {
@@ -85,6 +93,7 @@ typedef struct {
     double start;
     double minimum;
     double maximum;
+    double nominal;
 } CoreVariable;
 
 struct CoreInstance;
@@ -215,6 +224,27 @@ CoreStatus core_set_boolean(CoreInstance *instance, const char *function,
 /* Log that the model has no variables of `type_name` (for every other FMI type). */
 CoreStatus core_refuse_type(const CoreInstance *instance, const char *function,
                             const char *type_name, size_t n);
+/* Name of the variable of a kind and index ("?" if there is none), for messages. */
+const char *core_variable_name(CoreVariableKind kind, int index);
+/* Non-zero if all n values are finite; otherwise logs an error naming `function`, the first
+ * non-finite variable of `kind` and its value, and returns 0. */
+int core_check_finite(const CoreInstance *instance, const char *function, CoreVariableKind kind,
+                      const double values[], size_t n);
+/* Number of event indicators (0 for models without unilateral contact and linearised ones). */
+int core_number_of_event_indicators(void);
+/* Event indicators at the effective state, checked finite. */
+CoreStatus core_event_indicators(CoreInstance *instance, const char *function, double z[]);
+/* Nominal values of the continuous states (NX), from the variable table. */
+void core_state_nominals(double nominals[]);
+/* Dependency kind (0 none, then as fmi3DependencyKind) of unknown `row` (der(x) then y) on
+ * known `column` (x then u), as declared in <ModelStructure>. */
+int core_dependency_kind(const CoreInstance *instance, int row, int column);
+/* Check an importer's tolerance (refuse or warn, see CORE_SMALLEST_TOLERANCE). */
+CoreStatus core_check_tolerance(const CoreInstance *instance, const char *function,
+                                double tolerance);
+/* Check a communication step before it is taken: finite, not negative, advancing the time. */
+CoreStatus core_check_step(const CoreInstance *instance, const char *function,
+                           double current_time, double step);
 /* Invalidate cached derivatives/outputs after x, u, p or the mode changed. */
 void core_touch(CoreInstance *instance);
 /* Invalidate everything derived from the parameters (check, linearisation, initial state). */

@@ -287,7 +287,24 @@ CoreStatus core_prepare(CoreInstance *s) {
 
 /* ---- dynamics and Jacobian ------------------------------------------------------------- */
 
+static CoreStatus evaluate(CoreInstance *s, const double *x, double *dx, double *y);
+
+/* Never a success with a value that is not a number: a finite but absurd state or input (a head
+ * at -1e154 m) can overflow the model's expressions. */
 CoreStatus core_evaluate(CoreInstance *s, const double *x, double *dx, double *y) {
+    if (evaluate(s, x, dx, y) != CORE_OK) return CORE_ERROR;
+    if (dx != NULL && !core_check_finite(s, "model evaluation", CORE_VARIABLE_DERIVATIVE, dx,
+                                         (size_t)s->nx)) {
+        return CORE_ERROR;
+    }
+    if (y != NULL && !core_check_finite(s, "model evaluation", CORE_VARIABLE_OUTPUT, y,
+                                        (size_t)s->ny)) {
+        return CORE_ERROR;
+    }
+    return CORE_OK;
+}
+
+static CoreStatus evaluate(CoreInstance *s, const double *x, double *dx, double *y) {
     const int nq = s->nq, nx = s->nx, nu = s->nu, ny = s->ny;
     if (core_prepare(s) != CORE_OK) return CORE_ERROR;
     if (s->linearised) {
@@ -437,6 +454,18 @@ CoreStatus core_directional_derivative(CoreInstance *s, const char *function,
         return core_fail(s);
     }
     const double *J = s->work.jacobian;
+    for (int i = 0; i < (s->nx + s->ny) * ld; i++) {
+        if (isfinite(J[i])) continue;
+        const int row = i / ld, column = i % ld;
+        core_log_error(s, "%s: the partial derivative of %s with respect to %s is %g, not a "
+                       "finite number, at t = %g", function,
+                       row < s->nx ? core_variable_name(CORE_VARIABLE_DERIVATIVE, row)
+                                   : core_variable_name(CORE_VARIABLE_OUTPUT, row - s->nx),
+                       column < s->nx ? core_variable_name(CORE_VARIABLE_STATE, column)
+                                      : core_variable_name(CORE_VARIABLE_INPUT, column - s->nx),
+                       J[i], s->time);
+        return core_fail(s);
+    }
     const size_t n_out = adjoint ? n_knowns : n_unknowns;
     for (size_t i = 0; i < n_out; i++) sensitivity[i] = 0.0;
     for (size_t i = 0; i < n_unknowns; i++) {
@@ -445,6 +474,13 @@ CoreStatus core_directional_derivative(CoreInstance *s, const char *function,
             const double entry = J[row * ld + jacobian_index(s, function, knowns[j], 0)];
             if (adjoint) sensitivity[j] += entry * seed[i];
             else sensitivity[i] += entry * seed[j];
+        }
+    }
+    for (size_t i = 0; i < n_out; i++) { /* a finite Jacobian times a huge seed can overflow */
+        if (!isfinite(sensitivity[i])) {
+            core_log_error(s, "%s: sensitivity %zu = %g is not a finite number (seed too large?)",
+                           function, i, sensitivity[i]);
+            return CORE_ERROR;
         }
     }
     return CORE_OK;

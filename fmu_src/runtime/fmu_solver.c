@@ -53,7 +53,7 @@ static double effective_tolerance(const CoreInstance *s) {
     if (s->experiment_tolerance > 0.0 && s->experiment_tolerance < tolerance) {
         tolerance = s->experiment_tolerance;
     }
-    return tolerance;
+    return tolerance < CORE_MINIMUM_TOLERANCE ? CORE_MINIMUM_TOLERANCE : tolerance;
 }
 
 /* Weighted RMS norm of v with weights tol (1 + |x|). */
@@ -187,6 +187,10 @@ CoreStatus core_do_step(CoreInstance *s, double current_time, double step) {
     s->errors_suppressed = 0;
     if (status != CORE_OK) return status;
     s->time = end;
+    if (core_update_cache(s) != CORE_OK) { /* outputs at the end of the step must be numbers */
+        s->cache_valid = 0;
+        return CORE_ERROR;
+    }
     s->last_successful_time = end;
     core_log(s, CORE_OK, "logSolver", "DoStep to t = %g: %ld sub-steps so far, next h = %g", end,
              s->substeps, s->step_size);

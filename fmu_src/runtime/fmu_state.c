@@ -2,6 +2,7 @@
  * FMU state snapshots (Get/Set/Free/Serialize/Deserialize FMU state), shared by the FMI 2.0 and
  * FMI 3.0 front ends. See fmu_core.h.
  */
+#include <math.h>
 #include <string.h>
 
 #include "fmu_core.h"
@@ -9,7 +10,8 @@
 /* ---- FMU state snapshots --------------------------------------------------------------- */
 
 /* A snapshot is an array of doubles: this header, then x, u, p, u0. Serialised, it is the
- * same array as bytes (the importer restores it on the same platform). */
+ * same array as bytes (the importer restores it on the same platform) followed by the 64-bit
+ * FNV-1a hash of those bytes (8 bytes, little end first), so that a corrupted copy is refused. */
 enum {
     SNAPSHOT_MAGIC, SNAPSHOT_NQ, SNAPSHOT_NU, SNAPSHOT_NY, SNAPSHOT_NP, SNAPSHOT_LINEARISED,
     SNAPSHOT_INTERFACE, SNAPSHOT_MODE, SNAPSHOT_TIME, SNAPSHOT_TOLERANCE,
@@ -23,8 +25,30 @@ static size_t snapshot_length(const CoreInstance *s) {
     return SNAPSHOT_HEADER_LENGTH + (size_t)(s->nx + 2 * s->nu + s->np);
 }
 
+#define CHECKSUM_BYTES 8
+
 size_t core_serialized_state_size(const CoreInstance *instance) {
-    return snapshot_length(instance) * sizeof(double);
+    return snapshot_length(instance) * sizeof(double) + CHECKSUM_BYTES;
+}
+
+/* FNV-1a, 64 bits (Fowler, Noll, Vo): offset basis and prime of the published algorithm. */
+static unsigned long long fnv1a(const unsigned char *bytes, size_t size) {
+    unsigned long long hash = 14695981039346656037ULL;
+    for (size_t i = 0; i < size; i++) {
+        hash ^= bytes[i];
+        hash *= 1099511628211ULL;
+    }
+    return hash;
+}
+
+static void write_checksum(unsigned char *out, unsigned long long hash) {
+    for (int i = 0; i < CHECKSUM_BYTES; i++) out[i] = (unsigned char)(hash >> (8 * i));
+}
+
+static unsigned long long read_checksum(const unsigned char *in) {
+    unsigned long long hash = 0;
+    for (int i = 0; i < CHECKSUM_BYTES; i++) hash |= (unsigned long long)in[i] << (8 * i);
+    return hash;
 }
 
 void *core_get_state(CoreInstance *s, void *previous) {
@@ -57,6 +81,16 @@ static int check_snapshot(const CoreInstance *s, const double *h, const char *fu
         core_log_error(s, "%s: the FMU state does not belong to model %s", function,
                        MODEL_IDENTIFIER);
         return 0;
+    }
+    const double mode = h[SNAPSHOT_MODE];
+    int known_mode = 0;
+    for (unsigned int bit = 1; bit <= CORE_MODE_ERROR; bit <<= 1) known_mode |= mode == bit;
+    for (size_t i = 0; i < snapshot_length(s); i++) {
+        if (!isfinite(h[i]) || !known_mode) {
+            core_log_error(s, "%s: the FMU state is corrupted (%s)", function,
+                           known_mode ? "a value is not a finite number" : "unknown mode");
+            return 0;
+        }
     }
     if (h[SNAPSHOT_INTERFACE] != s->interface_type) {
         core_log_error(s, "%s: the FMU state was taken from a %s instance", function,
@@ -111,7 +145,9 @@ CoreStatus core_serialize_state(CoreInstance *s, const void *snapshot, unsigned 
         return CORE_ERROR;
     }
     if (!check_snapshot(s, snapshot, "SerializeFMUState")) return CORE_ERROR;
-    memcpy(bytes, snapshot, core_serialized_state_size(s));
+    const size_t length = snapshot_length(s) * sizeof(double);
+    memcpy(bytes, snapshot, length);
+    write_checksum(bytes + length, fnv1a(bytes, length));
     return CORE_OK;
 }
 
@@ -123,15 +159,26 @@ void *core_deserialize_state(CoreInstance *s, const unsigned char *bytes, size_t
                        bytes == NULL ? (size_t)0 : size);
         return NULL;
     }
-    double header[SNAPSHOT_HEADER_LENGTH];
-    memcpy(header, bytes, sizeof(header));
-    if (!check_snapshot(s, header, "DeserializeFMUState")) return NULL;
-    double *snapshot = previous;
-    if (snapshot == NULL) snapshot = s->allocate(snapshot_length(s), sizeof(double));
+    const size_t length = expected - CHECKSUM_BYTES;
+    if (read_checksum(bytes + length) != fnv1a(bytes, length)) {
+        core_log_error(s, "DeserializeFMUState: the serialized FMU state is corrupted (its "
+                       "checksum does not match its %zu bytes)", length);
+        return NULL;
+    }
+    double *snapshot = s->allocate(snapshot_length(s), sizeof(double));
     if (snapshot == NULL) {
         core_log_error(s, "DeserializeFMUState: out of memory");
         return NULL;
     }
-    memcpy(snapshot, bytes, expected);
+    memcpy(snapshot, bytes, length);
+    if (!check_snapshot(s, snapshot, "DeserializeFMUState")) {
+        s->release(snapshot);
+        return NULL;
+    }
+    if (previous != NULL) { /* reuse the importer's state only once the new one is sound */
+        memcpy(previous, snapshot, length);
+        s->release(snapshot);
+        return previous;
+    }
     return snapshot;
 }

@@ -53,6 +53,12 @@ int model_outputs(const double *p, const double *q, const double *v, const doubl
 int model_outputs_jacobian(const double *p, const double *q, const double *v, const double *u,
                            double *dy_dq, double *dy_dv, double *dy_du, char *message);
 
+/* Event indicators z(q, v, u): the importer locates where one changes sign (contact loss and
+ * re-contact). Called only if model_config.h declares MODEL_NUMBER_OF_EVENT_INDICATORS > 0, so
+ * hand-written models without events need not define it. */
+int model_event_indicators(const double *p, const double *q, const double *v, const double *u,
+                           double *z, char *message);
+
 /* A starting point for the static-equilibrium Newton solve r(q, 0, u) = 0 (NQ values). */
 int model_initial_guess(const double *p, const double *u, double *q, char *message);
 
