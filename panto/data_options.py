@@ -90,6 +90,9 @@ def add_data_options(parser: argparse.ArgumentParser) -> None:
                         help="identification rate [Hz]: decimate to it (rig runs: 50)")
     parser.add_argument("--sample-rate", type=positive_float,
                         help="rate [Hz] of a table without a time column")
+    parser.add_argument("--lowpass", type=positive_float, metavar="HZ",
+                        help="tables: zero-phase low-pass [Hz] of every used column before the "
+                             "rows are selected and the data decimated")
     parser.add_argument("--train-samples", metavar="START:STOP",
                         help="rows of the training file")
     parser.add_argument("--validate-samples", metavar="START:STOP",
@@ -123,7 +126,8 @@ def load_data(path: str, args: argparse.Namespace, *, validation: bool = False,
     options = LoadOptions(inputs=parse_pairs(args.inputs, "--inputs"),
                           outputs=parse_pairs(args.outputs, "--outputs"), rate=args.rate,
                           sample_rate=args.sample_rate, rows=_rows(args, validation),
-                          eta_offset=args.eta_offset, rig_mapping=rig_mapping, **rig)
+                          eta_offset=args.eta_offset, rig_mapping=rig_mapping,
+                          lowpass=getattr(args, "lowpass", None), **rig)
     return load_identification_data(path, options)
 
 
