@@ -102,3 +102,22 @@ def test_clear_errors_name_the_file_and_the_columns(tmp_path):
         load_identification_data(tmp_path / "run.csv", LoadOptions(
             inputs={"u": "drive"}, outputs={"y": "force"}))
     assert sorted(read_table(tmp_path / "run.csv")) == ["drive", "response", "time"]
+
+
+def test_lowpass_removes_what_lies_above_its_cut_off_and_keeps_the_band_below():
+    t = np.arange(4000) / 1000.0
+    slow, fast = np.sin(2 * np.pi * 5 * t), 0.5 * np.sin(2 * np.pi * 200 * t)
+    table = {"time": t, "u": slow + fast, "y": 2 * slow}
+    options = LoadOptions(inputs={"u": "u"}, outputs={"y": "y"}, lowpass=25.0,
+                          rows=slice(200, -200))
+    data = load_identification_data(table, options)
+    assert len(data) == 3600 and data.time[0] == 0.0
+    # 5 Hz lies far below the 4th-order 25 Hz cut-off (gain 1 - 1e-5 after two passes); 200 Hz far
+    # above it (gain (25/200)^8 ~ 6e-8)
+    assert np.max(np.abs(data.inputs[:, 0] - slow[200:-200])) < 1e-3
+    assert np.max(np.abs(data.outputs[:, 0] - 2 * slow[200:-200])) < 1e-3
+    with pytest.raises(ValueError, match="Nyquist"):
+        load_identification_data(table, LoadOptions(inputs={"u": "u"}, outputs={"y": "y"},
+                                                    lowpass=600.0))
+    with pytest.raises(ValueError, match="positive"):
+        LoadOptions(lowpass=-1.0)
