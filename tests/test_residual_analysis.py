@@ -211,3 +211,12 @@ def test_error_model_is_only_tested_where_the_input_carries_power():
     assert np.all(model.excited[0][f < 3.0]) and not np.any(model.excited[0][f > 15.0])
     assert np.any(model.falsified[0][f < 3.0])  # the in-band error is found
     assert not np.any(model.falsified[0][f > 15.0])  # nothing claimed where nothing was excited
+
+
+def test_a_constant_condition_is_one_bin_holding_the_whole_residual():
+    # an input held fixed (one-input runs record p at 4.5 bar): the quantile edges collapse
+    eps = np.random.default_rng(0).normal(size=500)
+    result = energy_by_condition(eps, np.full(500, 4.5), name="p")
+    assert list(result.count) == [500]
+    assert result.share[0] == pytest.approx(1.0)
+    assert result.residual_rms[0] == pytest.approx(np.sqrt(np.mean(eps ** 2)))

@@ -149,6 +149,8 @@ def energy_by_condition(residual: np.ndarray, variable: np.ndarray, *, name: str
     if edges is None:
         edges = np.unique(np.quantile(x, np.linspace(0, 1, n_bins + 1)))
     edges = np.asarray(edges, float)
+    if len(edges) < 2:  # a constant variable (an input held fixed): one bin holds everything
+        edges = np.array([float(np.min(x)), float(np.max(x))])
     index = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, len(edges) - 2)
     count = np.bincount(index, minlength=len(edges) - 1)
     energy = np.bincount(index, eps ** 2, len(edges) - 1)
