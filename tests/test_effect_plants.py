@@ -1,0 +1,213 @@
+"""The independent benchmark families' plants (``benchmarks/effect_plants.py``) obey their physics,
+each checked by a path apart from the plant's Runge-Kutta loop: the clean plant against the exact
+linear response (``scipy.signal.lsim`` of a state space written here from the chain matrices),
+static equilibrium by the whole chain's force balance, the friction force within its Coulomb
+bound, a pure delay as an exact shift, a unilateral contact that never pulls, the sensor mass's
+inertia against the second difference of the head's height; and the harness's split and guard.
+"""
+from __future__ import annotations
+
+import importlib.util
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy import signal
+
+_BENCHMARKS = Path(__file__).resolve().parent.parent / "benchmarks"
+
+
+def _load(name: str):
+    if name in sys.modules:
+        return sys.modules[name]
+    spec = importlib.util.spec_from_file_location(name, _BENCHMARKS / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(scope="module")
+def ep():
+    return _load("effect_plants")
+
+
+@pytest.fixture(scope="module")
+def harness():
+    return _load("diagnosis_families")
+
+
+def _truth(ep, masses: int, seed: int = 5) -> dict:
+    return ep.plants.draw_oscillator_truth(masses, np.random.default_rng(seed))
+
+
+def _run(ep, excitation: str = "aprbs", seconds: float = 2.0, rate: float = 200.0, seed: int = 2):
+    rng = np.random.default_rng(seed)
+    time = np.arange(int(seconds * rate)) / rate
+    eta, p = ep.excitation(excitation, rng, time, rate, 2)
+    return time, eta, p
+
+
+def _state_space(truth: dict, masses: int):
+    """``x' = A x + B [eta, p, 1]`` for the state ``[x_1..x_n, v_1..v_n]`` from M, K, C."""
+    m = np.diag([truth[f"m{i + 1}"] for i in range(masses)])
+    k = np.zeros((masses, masses))
+    c = np.zeros((masses, masses))
+    for i in range(masses):
+        for matrix, kind in ((k, "k"), (c, "c")):
+            value = truth[f"{kind}{i + 1}"]
+            matrix[i, i] += value
+            if i > 0:
+                matrix[i - 1, i - 1] += value
+                matrix[i, i - 1] -= value
+                matrix[i - 1, i] -= value
+    k[-1, -1] += truth["k_E"]
+    forcing = np.zeros((masses, 3))
+    forcing[-1, 0] = truth["k_E"]
+    forcing[0, 1] = truth["p_gain"]
+    forcing[0, 2] = truth["F_0"] + truth["k1"] * truth["y_0"]
+    inverse = np.linalg.inv(m)
+    a = np.block([[np.zeros((masses, masses)), np.eye(masses)], [-inverse @ k, -inverse @ c]])
+    b = np.vstack([np.zeros((masses, 3)), inverse @ forcing])
+    return a, b
+
+
+@pytest.mark.parametrize("masses", [2, 3], ids=["two-mass", "three-mass"])
+def test_clean_plant_agrees_with_the_exact_linear_response(ep, masses):
+    truth = _truth(ep, masses)
+    time, eta, p = _run(ep, "multisine")
+    run = ep.EffectPlant(truth).simulate(time, eta, p)
+    a, b = _state_space(truth, masses)
+    u = np.column_stack([eta, p, np.ones_like(eta)])
+    x0 = -np.linalg.solve(a, b @ u[0])
+    c = np.eye(2 * masses)
+    _, _, states = signal.lsim((a, b, c, np.zeros((2 * masses, 3))), u, time, X0=x0, interp=True)
+    head = states[:, masses - 1]
+    expected = {"xi": head, "y_cb": states[:, masses - 2], "F_c": truth["k_E"] * (head - eta)}
+    measured = ep.EffectPlant(truth).measure(run, time, 0, ("F_c", "y_cb", "xi"))
+    measured["y_cb"] = measured["y_cb"] - truth["y_cb_offset"]
+    for name, reference in expected.items():
+        assert np.ptp(reference) > 0
+        error = np.max(np.abs(measured[name] - reference)) / np.ptp(reference)
+        assert error < 1e-6, (name, error)
+
+
+@pytest.mark.parametrize("effect, setting", [("clean", {}), ("cubic_stiffness", {"k3": 2e5})])
+def test_constant_inputs_rest_in_the_chains_force_balance(ep, effect, setting):
+    """At rest the contact force carries the bellow force less the base spring's, whatever the
+    inner springs: ``F_c = p_gain p + F_0 - k_1 d - k_3 d^3`` with ``d = x_1 - y_0``."""
+    truth = _truth(ep, 3, seed=9)
+    time = np.arange(300) / 100.0
+    eta, p = np.full_like(time, 2.012), np.full_like(time, 4.8)
+    run = ep.EffectPlant(truth, effect, setting).simulate(time, eta, p)
+    d = run["x1"][0] - truth["y_0"]
+    balance = truth["p_gain"] * 4.8 + truth["F_0"] - truth["k1"] * d - setting.get("k3", 0.0) * d ** 3
+    assert np.ptp(run["F_c"]) < 1e-8 * abs(balance)
+    assert run["F_c"][-1] == pytest.approx(balance, rel=1e-9)
+    assert d > 0.01  # the bellow lifts mass 1 well above the relaxed height (k3 d^3 counts)
+
+
+def test_friction_force_is_bounded_by_its_coulomb_level(ep):
+    truth = _truth(ep, 2)
+    time, eta, p = _run(ep, "aprbs")
+    run = ep.EffectPlant(truth, "coulomb_friction", {"F_f": 12.0}).simulate(time, eta, p)
+    assert np.max(np.abs(run["friction"])) <= 12.0
+    assert np.max(np.abs(run["friction"])) > 0.95 * 12.0  # it slides: the bound is reached
+    assert np.all(run["friction"] * run["state"][2] <= 0.0)  # it opposes mass 1's velocity
+
+
+@pytest.mark.parametrize("target, column", [("eta", "F_c"), ("p", "y_cb")])
+def test_input_delay_shifts_the_outputs_by_exactly_the_delay(ep, target, column):
+    truth = _truth(ep, 2)
+    time, eta, p = _run(ep, "multisine", rate=100.0)
+    if target == "eta":  # the other input held: the whole response is that of the delayed one
+        p = np.full_like(p, p[0])
+    else:
+        eta = np.full_like(eta, eta[0])
+    shift = 7
+    delayed = ep.EffectPlant(truth, "input_delay", {"tau": shift / 100.0, "target": target})
+    clean = ep.EffectPlant(truth).measure(ep.EffectPlant(truth).simulate(time, eta, p), time, 0,
+                                          (column,))[column]
+    late = delayed.measure(delayed.simulate(time, eta, p), time, 0, (column,))[column]
+    scale = np.ptp(clean)
+    assert np.max(np.abs(late[shift:] - clean[:-shift])) < 1e-9 * scale
+    assert np.max(np.abs(late[:shift] - clean[0])) < 1e-9 * scale  # at rest until the delay
+    assert np.max(np.abs(late - clean)) > 1e-3 * scale  # and not the undelayed response
+
+
+def test_unilateral_contact_never_pulls_and_the_head_lifts_off(ep):
+    truth = _truth(ep, 2)
+    truth["F_0"] -= 0.7 * (truth["p_gain"] * 4.5 + truth["F_0"])  # 30 % of the preload
+    time, eta, _ = _run(ep, "aprbs")
+    p = np.full_like(time, 4.5)
+    lossy = ep.EffectPlant(truth, "contact_loss", {"preload_scale": 0.3}).simulate(time, eta, p)
+    bilateral = ep.EffectPlant(truth).simulate(time, eta, p)
+    assert np.min(lossy["F_c"]) >= 0.0
+    lifted = lossy["F_c"] == 0.0
+    assert 0.01 < np.mean(lifted) < 0.9
+    assert np.min(bilateral["F_c"]) < -10.0  # the same plant with a bilateral contact pulls
+
+
+def test_sensor_mass_adds_its_inertia_to_the_measured_force(ep):
+    truth = _truth(ep, 3)
+    time, eta, p = _run(ep, "multisine", rate=500.0, seconds=2.0)
+    plant = ep.EffectPlant(truth, "sensor_inertia", {"m_s": 0.8})
+    run = plant.simulate(time, eta, p)
+    excess = plant.measure(run, time, 0, ("F_c",))["F_c"] - run["F_c"]
+    head = run["x3"]
+    second_difference = (head[2:] - 2 * head[1:-1] + head[:-2]) * 500.0 ** 2
+    inertia = 0.8 * second_difference
+    assert np.max(np.abs(excess[1:-1] - inertia)) < 0.02 * np.ptp(inertia)
+
+
+def test_offset_differs_between_training_and_validation(ep):
+    truth = _truth(ep, 2)
+    time, eta, p = _run(ep, "ramps", seconds=1.0)
+    plant = ep.EffectPlant(truth, "offset", {"d": 6.0, "sign": -1.0})
+    run = plant.simulate(time, eta, p)
+    train, validation = (plant.measure(run, time, i, ("F_c",))["F_c"] for i in (0, 1))
+    np.testing.assert_allclose(train - validation, -6.0, atol=1e-9)
+    np.testing.assert_allclose(train - run["F_c"], -3.0, atol=1e-9)
+
+
+def test_a_clean_case_costs_nothing_and_a_delay_costs_fit(ep):
+    spec = ep.draw_spec("two-mass", "clean", 3, quick=True)
+    clean = ep.effect_case(replace(spec, duration=2.0, rate=50.0))
+    assert all(value == 0.0 for value in clean.detectability.values())
+    delay = ep.effect_case(replace(spec, label="input_delay", duration=2.0, rate=50.0,
+                                   strength=1.0, snr_db=40.0))
+    assert delay.strongest > 2.0
+    train, validation = delay.runs
+    assert not np.allclose(train["eta"], validation["eta"])  # two input realisations
+
+
+def test_split_is_stable_and_the_held_out_split_is_guarded(harness):
+    splits = [harness.split_of("two-mass", seed) for seed in range(400)]
+    assert splits == [harness.split_of("two-mass", seed) for seed in range(400)]
+    assert 0.15 < splits.count("heldout") / 400 < 0.35
+    sequence = harness.case_sequence("tune")
+    assert all(harness.split_of(s.family, s.seed) == "tune" for s in (next(sequence)
+                                                                     for _ in range(20)))
+    with pytest.raises(SystemExit):
+        harness.parse_arguments(["--split", "heldout"])
+    assert harness.parse_arguments(["--split", "heldout", "--i-am-not-tuning"]).split == "heldout"
+    with pytest.raises(SystemExit):
+        harness.parse_arguments(["--options", "no_such_option=1"])
+    options = harness.diagnosis_options(harness.parse_arguments(
+        ["--options", "adequacy=true", "max_effects=2"]).raw_options)
+    assert options.adequacy is True and options.max_effects == 2
+
+
+def test_scores_follow_the_labels(harness):
+    base = {"strongest": 5.0, "gap_closed": {"F_c": 0.9}, "detectability": {"F_c": 5.0}}
+    assert harness.score({**base, "label": "hysteresis", "verdict": "unexplained",
+                          "effects": []})["correct"]
+    assert not harness.score({**base, "label": "hysteresis", "verdict": "effect",
+                              "effects": ["cubic_stiffness"]})["correct"]
+    assert not harness.score({**base, "label": "clean", "verdict": "effect",
+                              "effects": ["extra_mode"]})["correct"]
+    right = harness.score({**base, "label": "dead_zone", "verdict": "effect",
+                           "effects": ["dead_zone", "offset"]})
+    assert right["correct"] and right["gap_closed_main"] == 0.9 and right["strong"]
