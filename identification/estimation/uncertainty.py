@@ -365,6 +365,12 @@ def correlated_groups(free: Sequence[str], cov_z: np.ndarray,
     return [tuple(g) for g in groups.values() if len(g) > 1]
 
 
+def _log_interval(theta: float, half: float) -> tuple[float, float]:
+    """``theta exp(-half) .. theta exp(half)``; 0 and infinity where that leaves the floats."""
+    with np.errstate(over="ignore", under="ignore"):
+        return float(theta * np.exp(-half)), float(theta * np.exp(half))
+
+
 def parameter_estimates(problem: Any, z: np.ndarray, info: Mapping[str, Any],
                         at_bound: Mapping[str, str], units: Mapping[str, str]
                         ) -> dict[str, ParameterEstimate]:
@@ -383,8 +389,7 @@ def parameter_estimates(problem: Any, z: np.ndarray, info: Mapping[str, Any],
         log = bool(problem.logarithmic[k])
         relative = std_z[k] if log else std[k] / abs(theta[k]) if theta[k] else math.inf
         half = Z95 * std_z[k] if log else Z95 * std[k]
-        interval = (theta[k] * math.exp(-min(half, 700.0)), theta[k] * math.exp(min(half, 700.0))) if log else \
-            (theta[k] - half, theta[k] + half)
+        interval = _log_interval(theta[k], half) if log else (theta[k] - half, theta[k] + half)
         verdict, reason = _verdict(name, report)
         side = at_bound.get(name)
         if side:
