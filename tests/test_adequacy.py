@@ -88,3 +88,18 @@ def test_the_diagnosis_refits_a_stuck_nominal_instead_of_naming_its_misfit(train
     assert result.adequacy is not None and result.adequacy["verdict"] == "adequate", text
     assert result.verdict == "none", text
     assert math.isfinite(result.fit_train["F_c"])
+
+
+def test_a_constant_input_is_left_out_of_the_black_box(train):
+    import dataclasses
+
+    from panto.identification.estimation.base import IdentificationError
+    from panto.identification.structures.adequacy import _varying_inputs
+
+    held = dataclasses.replace(train, inputs=np.column_stack([train.inputs[:, 0],
+                                                              np.full(len(train), 4.5)]))
+    varying = _varying_inputs(held)  # one-input runs record p held at 4.5 bar
+    assert varying.input_names == ("eta",) and varying.inputs.shape == (len(train), 1)
+    assert _varying_inputs(train) is train
+    with pytest.raises(IdentificationError, match="every input is constant"):
+        _varying_inputs(dataclasses.replace(train, inputs=np.ones_like(train.inputs)))

@@ -151,8 +151,9 @@ def check_adequacy(structure: ModelStructure, result: IdentificationResult,
     best, best_order = None, orders[0]
     if reference is not None and reference.black_box is not None:
         best, best_order, orders = reference.black_box, reference.order, reference.orders
+    varying = _varying_inputs(data)
     for order in orders if best is None else ():
-        box = fit_state_space(data, order, max_evaluations=max_evaluations)
+        box = fit_state_space(varying, order, max_evaluations=max_evaluations)
         if progress:
             progress(f"adequacy: black box of order {order}: " + _fits(box.fit))
         if best is None or _residual(box.fit) < _residual(best.fit):
@@ -184,6 +185,19 @@ def with_adequacy(structure: ModelStructure, result: IdentificationResult,
         text += "; so the global optimum in cost is reached although the starts did not show it"
     return dataclasses.replace(result, message=f"{result.message}; {text}",
                                details={**result.details, "adequacy": adequacy.to_dict()})
+
+
+def _varying_inputs(data: IdentificationData) -> IdentificationData:
+    """`data` without its constant inputs (a pressure held fixed): they carry no dynamics, and the
+    black box removes levels itself."""
+    keep = [j for j in range(data.inputs.shape[1]) if np.ptp(data.inputs[:, j]) > 0]
+    if not keep:
+        raise IdentificationError(f"{data.source or 'data'}: every input is constant; no black box "
+                                  "can be fitted for the adequacy check")
+    if len(keep) == data.inputs.shape[1]:
+        return data
+    return dataclasses.replace(data, inputs=data.inputs[:, keep],
+                               input_names=tuple(data.input_names[j] for j in keep))
 
 
 def _residual(fit: Mapping[str, float]) -> float:
