@@ -1,22 +1,75 @@
-"""Shared fixtures: the project's FMUs, built once per test session."""
+"""Shared fixtures: the project's FMUs, built once per test run.
+
+The suite runs in several processes (pytest-xdist, ``scripts/test``). A session fixture then runs
+once per worker process; the expensive ones below build into a folder shared by the workers of
+this run (the run's temporary base folder) under a file lock, so the first worker builds and the
+others read what it built. Without xdist they use the session's own temporary folder.
+"""
+import contextlib
+import os
+import pickle
+from pathlib import Path
+
 import pytest
+
+
+def _shared_folder(tmp_path_factory: pytest.TempPathFactory, name: str) -> Path:
+    """A folder shared by every xdist worker of this run, or this session's own without xdist."""
+    if os.environ.get("PYTEST_XDIST_WORKER") is None:
+        return tmp_path_factory.mktemp(name)
+    folder = tmp_path_factory.getbasetemp().parent / name  # the run's folder, above popen-gwN
+    folder.mkdir(exist_ok=True)
+    return folder
+
+
+@contextlib.contextmanager
+def _exclusive(lock_file: Path):
+    """Hold an exclusive lock on ``lock_file`` (POSIX ``flock``; no lock where it is missing)."""
+    try:
+        import fcntl
+    except ImportError:  # Windows: the builds below are still correct, only repeated
+        yield
+        return
+    with open(lock_file, "a") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
 
 
 @pytest.fixture(scope="session")
 def project_fmus(tmp_path_factory):
-    """All FMUs of ``panto build-fmu`` (FMI 2.0 and 3.0), as {file name: path}."""
-    from panto.build_fmu.project import build_project_fmus
+    """The displacement-excited FMUs of ``panto build-fmu`` (FMI 2.0 and 3.0), as {file name: path}.
 
-    built = build_project_fmus(tmp_path_factory.mktemp("fmus"))
+    The force-excited ones are built by ``tests/test_force_excitation.py``, the one file that
+    uses them (they would add about half a minute to every run that needs this fixture).
+
+    Built once per run: the first worker builds them and records the result; the others wait on
+    the lock and read the record.
+    """
+    from panto.build_fmu.project import build_project_fmus
+    from panto.fmu_src.models import DISPLACEMENT_FMU_NAMES
+
+    folder = _shared_folder(tmp_path_factory, "fmus")
+    record = folder / "built.pickle"
+    with _exclusive(folder / "build.lock"):
+        if record.exists():
+            built = pickle.loads(record.read_bytes())
+        else:
+            built = build_project_fmus(folder, names=DISPLACEMENT_FMU_NAMES)
+            record.write_bytes(pickle.dumps(built))
     return {b.path.name: b for b in built}
 
 
 @pytest.fixture(scope="session", autouse=True)
 def fmu_cache(tmp_path_factory):
-    """FMUs built on demand by the commands go to a temporary cache, not the user's home."""
-    import os
+    """FMUs built on demand by the commands go to a temporary cache, not the user's home.
 
-    folder = tmp_path_factory.mktemp("fmu_cache")
+    One cache for all workers of a run: ``project_fmu`` builds in a scratch folder and moves the
+    file into place, so a worker never sees half an FMU (two workers may build the same one).
+    """
+    folder = _shared_folder(tmp_path_factory, "fmu_cache")
     previous = os.environ.get("PANTO_FMU_CACHE")
     os.environ["PANTO_FMU_CACHE"] = str(folder)
     yield folder
