@@ -99,7 +99,7 @@ def _initial_guess_function(model: MechanicalModel) -> str:
     """Static-equilibrium starting point: closed-form values, optionally one bisection.
 
     ``model.extra["initial_guess"]`` may give ``{"values": {coordinate: expr(p, u)},
-    "bisect": (coordinate, height_expr(p, q), target_expr(p, u), low, high)}``; coordinates
+    "bisect": (coordinate, height_expr(p, q, u), target_expr(p, u), low, high)}``; coordinates
     without a value start at 0.
     """
     guess = model.extra.get("initial_guess", {})
@@ -116,15 +116,15 @@ def _initial_guess_function(model: MechanicalModel) -> str:
             f"    const double target = {sp.ccode(target, standard='C99')};",
             f"    double lo = {low!r}, hi = {high!r}, h_lo, h_hi, h_mid;",
             "    char ignored[MODEL_MESSAGE_LENGTH];",
-            f"    q_[{k}] = lo; if (guess_height(p_, q_, &h_lo, message)) return 1;",
+            f"    q_[{k}] = lo; if (guess_height(p_, q_, u_, &h_lo, message)) return 1;",
             f"    q_[{k}] = hi;",
-            "    if (guess_height(p_, q_, &h_hi, ignored)) {",
+            "    if (guess_height(p_, q_, u_, &h_hi, ignored)) {",
             "        /* the linkage does not close at hi: find the largest value where it does */",
             "        double ok = lo, bad = hi;",
             f"        for (int i = 0; i < 60; ++i) {{ q_[{k}] = 0.5 * (ok + bad);",
-            f"            if (guess_height(p_, q_, &h_mid, ignored)) bad = q_[{k}]; else ok = q_[{k}]; }}",
+            f"            if (guess_height(p_, q_, u_, &h_mid, ignored)) bad = q_[{k}]; else ok = q_[{k}]; }}",
             f"        hi = ok; q_[{k}] = hi;",
-            "        if (guess_height(p_, q_, &h_hi, message)) return 1;",
+            "        if (guess_height(p_, q_, u_, &h_hi, message)) return 1;",
             "    }",
             "    if ((h_lo - target) * (h_hi - target) > 0) {",
             '        snprintf(message, MODEL_MESSAGE_LENGTH, "no configuration reaches the height %g m '
@@ -132,15 +132,16 @@ def _initial_guess_function(model: MechanicalModel) -> str:
             "        return 1;\n    }",
             "    for (int i = 0; i < 100; ++i) {",
             f"        q_[{k}] = 0.5 * (lo + hi);",
-            "        if (guess_height(p_, q_, &h_mid, message)) return 1;",
+            "        if (guess_height(p_, q_, u_, &h_mid, message)) return 1;",
             f"        if ((h_mid - target) * (h_lo - target) > 0) {{ lo = q_[{k}]; h_lo = h_mid; }} else {{ hi = q_[{k}]; }}",
             "    }",
         ]
     lines.append("    (void)message; (void)p_; (void)u_;\n    return 0;\n}\n")
     prefix = ""
     if "bisect" in guess:
-        prefix = _function(model, "guess_height_impl(const double *p_, const double *q_, double *h, char *message)",
-                           [("h[0]", guess["bisect"][1])], v=False, u=False)
+        prefix = _function(model, "guess_height_impl(const double *p_, const double *q_, "
+                           "const double *u_, double *h, char *message)",
+                           [("h[0]", guess["bisect"][1])], v=False, u=True)
         prefix = prefix.replace("int guess_height_impl", "static int guess_height")
     return prefix + "\n".join(lines)
 

@@ -19,8 +19,8 @@ import sympy as sp
 
 from panto.fmu_src.codegen import generate_c_code
 from panto.fmu_src.numeric import LinearisedModel, ModelEvaluationError, NumericModel
-from panto.fmu_src.oscillators import derive_oscillator
-from panto.fmu_src.pantograph import PHI1_SEARCH_RANGE, derive_pantograph
+from panto.fmu_src.oscillators import derive_oscillator, derive_oscillator_force
+from panto.fmu_src.pantograph import PHI1_SEARCH_RANGE, derive_pantograph, derive_pantograph_force
 from panto.fmu_src.parameters import ParameterError, ParameterSet
 from panto.fmu_src.sparsity import jacobian_structure
 from panto.fmu_src.spec import ModelSpec, Variable
@@ -31,21 +31,34 @@ DERIVATIONS = {
     "Pantograph": derive_pantograph,
     "TwoMass": lambda: derive_oscillator(2),
     "ThreeMass": lambda: derive_oscillator(3),
+    "PantographForce": derive_pantograph_force,
+    "TwoMassForce": lambda: derive_oscillator_force(2),
+    "ThreeMassForce": lambda: derive_oscillator_force(3),
 }
 MODEL_NAMES = tuple(DERIVATIONS)
+#: The displacement-excited FMUs (inputs eta and p; thesis sections 2.5-2.7).
+DISPLACEMENT_FMU_NAMES = ("Pantograph", "PantographLinear", "TwoMass", "ThreeMass")
+#: The force-excited FMUs (contact force in, head motion out; thesis Fig. 2.6 and section 4.8).
+FORCE_FMU_NAMES = ("PantographForce", "PantographForceLinear", "TwoMassForce", "ThreeMassForce")
 #: The FMUs that ``panto build-fmu`` builds (each as FMI 2.0 and FMI 3.0).
-FMU_NAMES = ("Pantograph", "PantographLinear", "TwoMass", "ThreeMass")
+FMU_NAMES = DISPLACEMENT_FMU_NAMES + FORCE_FMU_NAMES
 
+#: Force-excited models: a contact force within 10 kN either way (static contact forces are
+#: 70-120 N, EN 50318 limits the dynamic one to a few hundred N); pantograph bellow torque 0 to
+#: 10 kN m (10 bar at the Table 4.1 gain of 260 N m/bar gives 2.6 kN m).
+FORCE_INPUT_RANGES = {"F_c": (-1e4, 1e4), "p": (0.0, 10.0)}
 #: Admissible input ranges (minimum, maximum) declared by the FMUs; the setters refuse values
 #: outside. Bellow pressure: 0 bar to the 10 bar the train's supply provides (thesis section
 #: 2.1). Pantograph eta: heights above the frame hinge, from 0 (the head cannot go below it) to
 #: 10 m (no pantograph reaches that far); the reach of the tunable geometry is checked at the
 #: equilibrium (default geometry: cross bar 0.55 m to 3.24 m). Oscillators: eta within 100 m of
-#: any admissible relaxed height y_0 (itself in [-100, 100] m).
+#: any admissible relaxed height y_0 (itself in [-100, 100] m). Force-excited models: above.
 INPUT_RANGES = {
     "Pantograph": {"eta": (0.0, 10.0), "p": (0.0, 10.0)},
     "TwoMass": {"eta": (-200.0, 200.0), "p": (0.0, 10.0)},
     "ThreeMass": {"eta": (-200.0, 200.0), "p": (0.0, 10.0)},
+    **{name: FORCE_INPUT_RANGES for name in ("TwoMassForce", "ThreeMassForce")},
+    "PantographForce": {"M_b": (0.0, 1e4), "F_c": FORCE_INPUT_RANGES["F_c"]},
 }
 #: State nominals: for a coordinate the power of ten nearest its default static equilibrium
 #: (Pantograph at eta = 2 m, p = 4 bar; oscillators at eta = y_0 = 0), for a velocity ten times
@@ -55,6 +68,10 @@ STATE_NOMINALS = {
                    "dxi": 1.0},
     "TwoMass": {"x1": 1e-2, "x2": 1e-3, "v1": 1e-1, "v2": 1e-2},
     "ThreeMass": {"x1": 1e-2, "x2": 1e-2, "x3": 1e-3, "v1": 1e-1, "v2": 1e-1, "v3": 1e-2},
+    "PantographForce": {"phi1": 1.0, "delta": 1e-3, "xi": 1.0, "dphi1": 1.0, "ddelta": 1e-2,
+                        "dxi": 1.0},
+    "TwoMassForce": {"x1": 1e-2, "x2": 1e-2, "v1": 1e-1, "v2": 1e-1},
+    "ThreeMassForce": {"x1": 1e-2, "x2": 1e-2, "x3": 1e-2, "v1": 1e-1, "v2": 1e-1, "v3": 1e-1},
 }
 
 
@@ -96,11 +113,12 @@ def load_parameters(path: str | Path, name: str | None = None) -> ParameterSet:
 def check_parameters(params: ParameterSet) -> None:
     """Model-specific admissibility beyond the bounds; raises :class:`ParameterError`.
 
-    For the pantograph, the linkage must close somewhere in the working range of phi1.
+    For the pantograph (displacement- or force-excited), the linkage must close somewhere in the
+    working range of phi1.
     """
-    if params.model != "Pantograph":
+    if params.model not in ("Pantograph", "PantographForce"):
         return
-    numeric = numeric_model("Pantograph")
+    numeric = numeric_model(params.model)
     low, high = PHI1_SEARCH_RANGE
     for phi1 in np.linspace(low, high, 28):
         try:
@@ -139,13 +157,13 @@ def model_spec(name: str) -> ModelSpec:
                      for u in model.inputs),
         outputs=model.outputs, parameters=model.parameters, c_code=_c_code(model.name),
         linearised=linearised, dependencies=jacobian_structure(model, linearised=linearised),
-        event_indicators=CONTACT_EVENT_INDICATORS,
+        event_indicators=CONTACT_EVENT_INDICATORS if _has_contact(model) else (),
     )
 
 
-#: The event indicator of every model: the contact gap (head height minus eta) while the contact
-#: is unilateral, so that Model Exchange importers locate contact loss and re-contact; 1 (no
-#: event) while it is bilateral.
+#: The event indicator of every model with a contact spring: the contact gap (head height minus
+#: eta) while the contact is unilateral, so that Model Exchange importers locate contact loss and
+#: re-contact; 1 (no event) while it is bilateral. The force-excited models have none.
 CONTACT_EVENT_INDICATORS = (Variable("contact_gap", "m", "head height minus eta while the "
                                      "contact is unilateral (zero at contact loss and "
                                      "re-contact), 1 while it is bilateral"),)
@@ -156,6 +174,11 @@ def contact_gap(model: MechanicalModel) -> sp.Expr:
     unilateral = sp.Symbol("unilateral_contact", real=True)
     head, eta = model.q[-1], sp.Symbol("eta", real=True)
     return sp.Piecewise((head - eta, unilateral > sp.Rational(1, 2)), (1, True))
+
+
+def _has_contact(model: MechanicalModel) -> bool:
+    """Whether the model has the contact spring to the input eta (the force-excited ones not)."""
+    return any(u.name == "eta" for u in model.inputs)
 
 
 def _distinct_from_outputs(variable, model: MechanicalModel):
@@ -169,7 +192,8 @@ def _distinct_from_outputs(variable, model: MechanicalModel):
 @lru_cache(maxsize=None)
 def _c_code(name: str) -> str:
     model = symbolic_model(name)
-    return generate_c_code(model, event_indicators=(contact_gap(model),))
+    indicators = (contact_gap(model),) if _has_contact(model) else ()
+    return generate_c_code(model, event_indicators=indicators)
 
 
 class Model:
@@ -178,9 +202,16 @@ class Model:
     Parameters
     ----------
     name : str
-        ``"Pantograph"``, ``"TwoMass"`` or ``"ThreeMass"``.
+        ``"Pantograph"``, ``"TwoMass"`` or ``"ThreeMass"``, or a force-excited model
+        (``"PantographForce"``, ``"TwoMassForce"``, ``"ThreeMassForce"``).
     parameters : ParameterSet or mapping, optional
         Parameter values (defaults where missing).
+
+    Notes
+    -----
+    The methods name the inputs ``eta, p`` of the displacement-excited models; a force-excited
+    model takes its own two inputs in the same places, in the order of :attr:`input_names`
+    (``M_b, F_c`` for the pantograph, ``F_c, p`` for the oscillators).
     """
 
     def __init__(self, name: str, parameters: ParameterSet | dict | None = None):

@@ -126,3 +126,60 @@ def derive_oscillator(n: int) -> MechanicalModel:
         output_expressions=sp.Matrix([x[-2], x[-1], contact]),
         energy=kinetic + potential + sym["k_E"] * (x[-1] - eta) ** 2 / 2 - work,
     )
+
+
+@lru_cache(maxsize=2)
+def derive_oscillator_force(n: int) -> MechanicalModel:
+    """The n-mass oscillator (n = 2 or 3) excited by force: contact force in, head motion out.
+
+    The model of :func:`derive_oscillator` without the contact spring (thesis section 4.8: the
+    derived models "in force-input form"): the contact force ``F_c`` [N] is an input that pushes
+    the head (mass n) down, so that a co-simulation master coupling by force feeds it the
+    catenary's contact force. Equations::
+
+        m_i a_i = -k_i (x_i - x_{i-1}) - c_i (v_i - v_{i-1})
+                  + k_{i+1} (x_{i+1} - x_i) + c_{i+1} (v_{i+1} - v_i) - F_f,i tanh(v_i / v_eps)
+                  + [i = 1] (p_gain p + F_0) - [i = n] F_c
+
+    with x_0 = v_0 = 0 measured from y_0. The spring k1 grounds the chain: for k1 > 0 constant
+    inputs settle at x_1 - y_0 = (p_gain p + F_0 - F_c) / k1, each spring k_j above mass 1
+    shortened by F_c / k_j; for k1 = 0 the chain has a zero eigenvalue and a constant net force
+    drives it away at the terminal speed (p_gain p + F_0 - F_c) / c1.
+    """
+    if n not in DEFAULTS:
+        raise ValueError(f"oscillator with {n} masses is not defined (choose 2 or 3)")
+    params = tuple(s for s in _parameters(n) if s.name not in ("k_E", "unilateral_contact"))
+    sym = {par.name: sp.Symbol(par.name, real=True) for par in params}
+    x = [sp.Symbol(f"x{i + 1}", real=True) for i in range(n)]
+    v = [sp.Symbol(f"v{i + 1}", real=True) for i in range(n)]
+    f_c, p = sp.symbols("F_c p", real=True)
+    rel = [xi - sym["y_0"] for xi in x]
+    uplift = sym["p_gain"] * p + sym["F_0"]
+
+    def link(i: int) -> sp.Expr:
+        """Force of the spring-damper below mass i (index from 0) on that mass."""
+        below_x, below_v = (rel[i - 1], v[i - 1]) if i > 0 else (0, 0)
+        return -sym[f"k{i + 1}"] * (rel[i] - below_x) - sym[f"c{i + 1}"] * (v[i] - below_v)
+
+    forces = [link(i) - sym[f"F_f{i + 1}"] * sp.tanh(v[i] / sym["v_eps"])
+              - (link(i + 1) if i + 1 < n else f_c) + (uplift if i == 0 else 0) for i in range(n)]
+    potential = sum(sym[f"k{i + 1}"] * (rel[i] - (rel[i - 1] if i else 0)) ** 2 / 2 for i in range(n))
+    kinetic = sum(sym[f"m{i + 1}"] * v[i] ** 2 / 2 for i in range(n))
+    return MechanicalModel(
+        name={2: "TwoMassForce", 3: "ThreeMassForce"}[n],
+        description=f"{n}-mass oscillator pantograph excited by the contact force (thesis "
+                    "sections 2.6-2.7 in the force-input form of section 4.8)",
+        coordinates=tuple(Variable(f"x{i + 1}", "m", f"height of mass {i + 1}") for i in range(n)),
+        velocities=tuple(Variable(f"v{i + 1}", "m/s", f"velocity of mass {i + 1}") for i in range(n)),
+        inputs=(Variable("F_c", "N", "contact force on the head, positive when the head presses "
+                         "up on the wire (it acts downward on the head)", DEFAULTS[n]["F_0"]),
+                Variable("p", "bar", "bellow pressure", 0.0)),
+        outputs=(Variable("y_cb", "m", "height of the mass under the head (frame)"),
+                 Variable("xi", "m", "head height"),
+                 Variable("v_cb", "m/s", "velocity of the mass under the head"),
+                 Variable("v_head", "m/s", "head velocity")),
+        parameters=params, mass_matrix=sp.diag(*[sym[f"m{i + 1}"] for i in range(n)]),
+        forces=sp.Matrix(forces),
+        output_expressions=sp.Matrix([x[-2], x[-1], v[-2], v[-1]]),
+        energy=kinetic + potential - uplift * x[0] + f_c * x[-1],
+    )

@@ -254,3 +254,107 @@ def _pantograph_model(kin: dict, mass: sp.Matrix, forces: sp.Matrix, contact: sp
                               "bisect": ("phi1", y_cb, eta, *PHI1_SEARCH_RANGE)},
         },
     )
+
+
+# --- force excitation (thesis Fig. 2.6, sections 2.3 and 4.4) --------------------------------
+
+#: Parameters of the force-excited pantograph: those of the displacement-excited model without
+#: the carbon contact (k_ph, unilateral_contact) and the bellow's pressure law (k_p, kappa_p,
+#: phi1_ref): the bellow torque is an input.
+FORCE_PARAMETERS: tuple[ParameterSpec, ...] = tuple(
+    spec for spec in PARAMETERS
+    if spec.name not in ("k_ph", "unilateral_contact", "k_p", "kappa_p", "phi1_ref"))
+
+FORCE_INPUTS = (
+    Variable("M_b", "N.m", "bellow torque on the lower arm (thesis Fig. 2.6 and eq. 2.26: M); "
+             "start: 4 bar at the Table 4.1 gain k_p = 260 N m/bar", 1040.0),
+    Variable("F_c", "N", "contact force on the head, positive when the head presses up on the "
+             "wire (it acts downward on the head; thesis Fig. 2.6: F)", 80.0),
+)
+FORCE_OUTPUTS = (
+    Variable("y_cb", "m", "cross bar height"),
+    Variable("xi", "m", "collector head height"),
+    Variable("v_cb", "m/s", "cross bar velocity"),
+    Variable("v_head", "m/s", "collector head velocity"),
+)
+
+
+@lru_cache(maxsize=1)
+def derive_pantograph_force() -> MechanicalModel:
+    """Derive the force-excited pantograph of thesis Fig. 2.6 (sections 2.3 and 4.4).
+
+    The model of :func:`derive_pantograph` without the carbon-contact spring: the bellow torque
+    ``M_b`` [N m] acts on phi1 and the contact force ``F_c`` [N] pushes the head down (section
+    4.8: "removing the contact spring and adding an input force"). Nothing holds the linkage at a
+    height but the balance of ``M_b`` against the weight and ``F_c``; the static torque that
+    balances them falls as the pantograph rises, so the equilibrium is unstable (one small
+    positive eigenvalue, the slow rise or fall the thesis reports in section 4.4).
+
+    Returns
+    -------
+    MechanicalModel
+        ``M(q) dv/dt = r(q, v, u)`` with q = (phi1, delta, xi), u = (M_b, F_c) and outputs
+        (y_cb, xi, v_cb, v_head).
+    """
+    kin = linkage()
+    phi1, delta = kin["phi1"], kin["delta"]
+    xi, dphi1, ddelta, dxi = _symbols("xi dphi1 ddelta dxi")
+    q, v = [phi1, delta, xi], [dphi1, ddelta, dxi]
+    dependents = (
+        Dependent(kin["phi2"], kin["phi2_expr"], {phi1: kin["S2"], delta: kin["D2"]}),
+        Dependent(kin["phi3"], kin["phi3_expr"], {phi1: kin["S3"], delta: kin["D3"]}),
+    )
+
+    def d(expression: sp.Expr, coordinate: sp.Symbol) -> sp.Expr:
+        return total_derivative(expression, coordinate, dependents)
+
+    mass, gravity = _mass_matrix_and_gravity(kin, q, d)
+    forces, energy, velocity_cb = _force_input_forces(kin, q, v, mass, gravity, d)
+    m_c, g, f_c = _symbols("m_c g F_c")
+    # Static torque that holds the linkage at phi1 (delta = 0): the bars' weight plus the head's
+    # weight and the contact force passed on through the suspension (eq. 2.23 at rest).
+    arms = gravity - m_c * g * xi
+    holding = d(arms, phi1) + (m_c * g + f_c) * d(kin["y_cb"], phi1)
+    return MechanicalModel(
+        name="PantographForce",
+        description="Physically based high-speed pantograph excited by force (thesis Fig. 2.6): "
+                    "bellow torque on the lower arm and contact force on the head as inputs, "
+                    "no contact spring",
+        coordinates=COORDINATES, velocities=VELOCITIES, inputs=FORCE_INPUTS,
+        outputs=FORCE_OUTPUTS, parameters=FORCE_PARAMETERS, mass_matrix=mass, forces=forces,
+        output_expressions=sp.Matrix([kin["y_cb"], xi, velocity_cb, dxi]),
+        dependents=dependents,
+        guards=(Guard(kin["discriminant"],
+                      "the linkage cannot close at phi1 = {phi1} rad, delta = {delta} m "
+                      "(thrust rod and arms out of reach)"),),
+        energy=energy,
+        extra={
+            "y_cb": kin["y_cb"], "x_cb": kin["x_cb"], "linkage": kin, "holding_torque": holding,
+            # Start the equilibrium solve where the holding torque equals the bellow torque.
+            "initial_guess": {"values": {"delta": 0, "xi": 0},
+                              "bisect": ("phi1", holding, sp.Symbol("M_b", real=True),
+                                         *PHI1_SEARCH_RANGE)},
+        },
+    )
+
+
+def _force_input_forces(kin: dict, q: list[sp.Symbol], v: list[sp.Symbol], mass: sp.Matrix,
+                        potential: sp.Expr, d: Callable[[sp.Expr, sp.Symbol], sp.Expr],
+                        ) -> tuple[sp.Matrix, sp.Expr, sp.Expr]:
+    """Right-hand side (2.23) of the force-excited model, its energy and the cross-bar velocity."""
+    (phi1, delta, xi), (dphi1, ddelta, dxi) = q, v
+    k, k_c, k_c3, t_f, omega_eps = _symbols("k k_c k_c3 T_f omega_eps")
+    c1, c2, c3, c_c, m_b, f_c = _symbols("c1 c2 c3 c_c M_b F_c")
+    dy_cb = sum(d(kin["y_cb"], qk) * vk for qk, vk in zip(q, v))
+    dphi2 = sum(d(kin["phi2"], qk) * vk for qk, vk in zip(q, v))
+    stroke = xi - kin["y_cb"]
+    potential += k * delta**2 / 2 + k_c * stroke**2 / 2 + k_c3 * stroke**4 / 4
+    rayleigh = (c1 * dphi1**2 + c2 * ddelta**2 + c3 * dphi2**2 + c_c * (dxi - dy_cb) ** 2) / 2
+    external = sp.Matrix([m_b - t_f * sp.tanh(dphi1 / omega_eps), 0, -f_c])
+    generalised = sp.Matrix(
+        [-d(potential, qk) - sp.diff(rayleigh, vk) for qk, vk in zip(q, v)]) + external
+    mass_derivative = [mass.applyfunc(lambda e, qk=qk: d(e, qk)) for qk in q]
+    forces = lagrangian_forces(mass, generalised, v, mass_derivative)
+    kinetic = (sp.Matrix(v).T * mass * sp.Matrix(v))[0, 0] / 2
+    energy = kinetic + potential - m_b * phi1 + f_c * xi  # work potential of constant inputs
+    return forces, energy, dy_cb

@@ -18,9 +18,9 @@ from fmpy import extract, read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.simulation import instantiate_fmu
 
-from panto.fmu_src.models import FMU_NAMES, INPUT_RANGES
+from panto.fmu_src.models import DISPLACEMENT_FMU_NAMES, INPUT_RANGES
 
-FILES = [f"{name}{suffix}.fmu" for name in FMU_NAMES for suffix in ("", "_fmi3")]
+FILES = [f"{name}{suffix}.fmu" for name in DISPLACEMENT_FMU_NAMES for suffix in ("", "_fmi3")]
 
 
 class Instance:

@@ -23,9 +23,9 @@ from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.simulation import instantiate_fmu
 from scipy.integrate import solve_ivp
 
-from panto.fmu_src.models import FMU_NAMES, Model
+from panto.fmu_src.models import DISPLACEMENT_FMU_NAMES, Model
 
-FILES = [f"{name}{suffix}.fmu" for name in FMU_NAMES for suffix in ("", "_fmi3")]
+FILES = [f"{name}{suffix}.fmu" for name in DISPLACEMENT_FMU_NAMES for suffix in ("", "_fmi3")]
 #: Parameters set away from zero so that no dependency vanishes by accident of the defaults.
 GENERIC_PARAMETERS = {
     "Pantograph": {"T_f": 5.0, "kappa_p": 0.3, "k_c3": 1e6, "alpha": 0.05},

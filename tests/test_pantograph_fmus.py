@@ -7,10 +7,10 @@ from fmpy.fmi2 import FMU2Model
 
 from panto.build_fmu.crosscheck import check_fmu_with_toolbox, simulate_in_independent_importer
 from panto.build_fmu.simulate import FmuSimulator
-from panto.fmu_src.models import FMU_NAMES, Model
+from panto.fmu_src.models import DISPLACEMENT_FMU_NAMES, Model
 from panto.fmu_src.simulation import simulate_model
 
-FILES = [f"{name}{suffix}.fmu" for name in FMU_NAMES for suffix in ("", "_fmi3")]
+FILES = [f"{name}{suffix}.fmu" for name in DISPLACEMENT_FMU_NAMES for suffix in ("", "_fmi3")]
 
 
 def _step_inputs(name: str, t: np.ndarray) -> dict:

@@ -12,8 +12,8 @@ BLOCKS = re.findall(r"```python\n# check: ([\w.-]+)\n(.*?)```", PAGE.read_text()
 def test_the_page_has_its_checks_and_its_to_do_rows():
     text = PAGE.read_text()
     assert {name for name, _ in BLOCKS} == {"eq-2.22", "video-step-3", "fig-4.9", "chapter-5"}
-    assert "force-excitation model (section 2.3/4.4): to do" in text
-    assert "section 4.8 comparison: to do" in text
+    assert "tests/test_force_excitation.py" in text  # the force-excitation rows, done
+    assert "identification/section_4_8.md" in text
     assert "docs/thesis.md" in (ROOT / "README.md").read_text()
 
 
