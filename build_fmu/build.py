@@ -1,7 +1,8 @@
 """Build an FMU from a :class:`~panto.fmu_src.spec.ModelSpec`: the one entry point of the package.
 
 Phases: lay out the variables → derive the instantiation token → write the model description
-(and, for FMI 3.0, the build description) → write the C sources → compile → zip.
+(and, for FMI 3.0, the build description) → write the C sources → compile (for every
+platform with ziglang) → zip.
 """
 from __future__ import annotations
 
@@ -12,11 +13,11 @@ from pathlib import Path
 
 from panto.fmu_src.spec import ModelSpec
 
-from .compile import compile_library, read_runtime_sources, write_sources
+from .compile import compile_binaries, read_runtime_sources, write_sources
 from .configuration import write_model_config
 from .description_fmi2 import write_model_description_fmi2
 from .description_fmi3 import write_build_description, write_model_description_fmi3
-from .package import make_binary_path, package_fmu
+from .package import package_fmu
 from .variables import FmuVariable, layout_variables
 
 LOGGER = logging.getLogger(__name__)
@@ -66,7 +67,8 @@ def _write_descriptions(staging: Path, spec: ModelSpec, variables: tuple[FmuVari
     (staging / "modelDescription.xml").write_text(text, encoding="utf-8")
 
 
-def build_fmu(spec: ModelSpec, out_dir: str | Path, *, fmi_version: int) -> Path:
+def build_fmu(spec: ModelSpec, out_dir: str | Path, *, fmi_version: int,
+              cross: bool = False) -> Path:
     """Build, compile and package one FMU (Model Exchange and Co-Simulation).
 
     Parameters
@@ -79,6 +81,9 @@ def build_fmu(spec: ModelSpec, out_dir: str | Path, *, fmi_version: int) -> Path
         Folder for the ``.fmu`` (created if missing).
     fmi_version : int
         2 or 3 (keyword only).
+    cross : bool
+        Also cross-compile for Windows, macOS and aarch64 Linux when ``ziglang`` is installed
+        (a failing target is left out with a warning); default: the host's library only.
 
     Returns
     -------
@@ -104,6 +109,6 @@ def build_fmu(spec: ModelSpec, out_dir: str | Path, *, fmi_version: int) -> Path
         source_files = write_sources(staging / "sources", fmi_version, spec.c_code,
                                      write_model_config(spec, variables, token))
         _write_descriptions(staging, spec, variables, token, fmi_version, source_files)
-        compile_library(staging / "sources",
-                        staging / make_binary_path(spec.identifier, fmi_version))
+        compile_binaries(staging / "sources", staging, spec.identifier, fmi_version,
+                         cross=cross)
         return package_fmu(staging, destination)

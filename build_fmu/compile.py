@@ -1,4 +1,10 @@
-"""Write an FMU's C sources and compile them into a shared library with the machine's compiler.
+"""Write an FMU's C sources and compile them into shared libraries for every platform.
+
+With ``ziglang`` installed, ``zig cc`` builds the host's library (Linux against a glibc 2.17
+baseline) and, on request, cross-compiles it for every platform of
+:data:`~panto.build_fmu.package.PLATFORMS` (Windows, macOS, aarch64 Linux; FMI 2.0's
+``darwin64`` is a universal x86_64 + arm64 library); without it the machine's own C compiler
+builds the host's library only.
 
 ``sources/`` holds everything needed to rebuild the binary anywhere: the generated model
 (``model.c``), the generated ``model_config.h``, the hand-written runtime of
@@ -6,13 +12,21 @@
 """
 from __future__ import annotations
 
+import importlib.util
 import logging
 import os
 import shutil
+import struct
 import subprocess
+import sys
+import tempfile
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 
 from panto.fmu_src.spec import RUNTIME_DIR
+
+from .package import PLATFORMS, host_platform, make_binary_path, platform_binary_path
 
 LOGGER = logging.getLogger(__name__)
 
@@ -30,6 +44,8 @@ MODEL_SOURCE_NAME = "model.c"
 CONFIGURATION_NAME = "model_config.h"
 COMPILER_FLAGS = ("-std=c99", "-O2", "-fPIC", "-shared", "-fvisibility=hidden", "-Wall",
                   "-Wextra")
+#: Extra flags of ``zig cc`` builds: no debug information, stripped (exports stay).
+ZIG_FLAGS = ("-g0", "-s")
 
 
 class CompilationError(RuntimeError):
@@ -104,10 +120,20 @@ def find_compiler() -> str:
     raise CompilationError("no C compiler found (tried $CC, cc, gcc); install gcc or set CC")
 
 
-def compile_library(sources: Path, output: Path) -> Path:
+def find_zig() -> list[str] | None:
+    """The command that runs ziglang's ``zig``, or None if ``ziglang`` is not installed."""
+    spec = importlib.util.find_spec("ziglang")
+    if spec is None or spec.origin is None:
+        return None
+    executable = Path(spec.origin).parent / ("zig.exe" if os.name == "nt" else "zig")
+    return [str(executable)] if executable.is_file() else [sys.executable, "-m", "ziglang"]
+
+
+def compile_library(sources: Path, output: Path, *, zig_target: str | None = None) -> Path:
     """Compile every ``.c`` file in ``sources`` into the shared library ``output``.
 
-    Only the ``fmi2*``/``fmi3*`` functions are exported (``-fvisibility=hidden``).
+    Only the ``fmi2*``/``fmi3*`` functions are exported (``-fvisibility=hidden``; on Windows
+    ``__declspec(dllexport)`` of the FMI headers).
 
     Parameters
     ----------
@@ -115,6 +141,8 @@ def compile_library(sources: Path, output: Path) -> Path:
         Folder written by :func:`write_sources`.
     output : Path
         Path of the library to create (its folder is created).
+    zig_target : str, optional
+        Cross-compile with ``zig cc -target zig_target``; default: the machine's compiler.
 
     Returns
     -------
@@ -124,18 +152,169 @@ def compile_library(sources: Path, output: Path) -> Path:
     Raises
     ------
     CompilationError
-        With the command and the compiler's messages, if compilation fails.
+        With the command and the compiler's messages, if compilation fails (or ``zig_target``
+        is given and ziglang is not installed).
     """
     output.parent.mkdir(parents=True, exist_ok=True)
-    c_files = sorted(str(path) for path in sources.glob("*.c"))
-    command = [find_compiler(), *COMPILER_FLAGS, "-I", str(sources), "-o", str(output),
-               *c_files, "-lm"]
-    LOGGER.info("compiling %s", output.name)
-    LOGGER.debug("%s", " ".join(command))
-    result = subprocess.run(command, capture_output=True, text=True, check=False)
-    if result.returncode != 0:
-        raise CompilationError(f"compiling {output.name} failed (exit code {result.returncode})"
-                               f"\ncommand: {' '.join(command)}\n{result.stderr}{result.stdout}")
+    c_files = sorted(str(path.resolve()) for path in sources.glob("*.c"))
+    if zig_target is None:
+        compiler = [find_compiler(), *COMPILER_FLAGS]
+    else:
+        zig = find_zig()
+        if zig is None:
+            raise CompilationError("ziglang is not installed (pip install ziglang)")
+        compiler = [*zig, "cc", "-target", zig_target, *COMPILER_FLAGS, *ZIG_FLAGS]
+    with tempfile.TemporaryDirectory(prefix="cc_") as scratch:  # side files (.pdb, .lib) stay
+        built = Path(scratch) / output.name
+        command = [*compiler, "-I", str(sources.resolve()), "-o", str(built), *c_files, "-lm"]
+        LOGGER.info("compiling %s%s", output.name, f" for {zig_target}" if zig_target else "")
+        LOGGER.debug("%s", " ".join(command))
+        result = subprocess.run(command, capture_output=True, text=True, check=False,
+                                cwd=scratch)
+        if result.returncode != 0:
+            raise CompilationError(f"compiling {output.name} failed (exit code "
+                                   f"{result.returncode})\ncommand: {' '.join(command)}\n"
+                                   f"{result.stderr}{result.stdout}")
+        shutil.move(str(built), output)
     if result.stderr.strip():
         LOGGER.warning("compiler warnings for %s:\n%s", output.name, result.stderr)
+    return output
+
+
+@dataclass(frozen=True)
+class CompiledBinaries:
+    """What :func:`compile_binaries` put into an FMU.
+
+    Attributes
+    ----------
+    platforms : tuple of str
+        The FMI 3.0 platform tuples a library was built for.
+    failed : tuple of str
+        The platforms whose cross-compilation failed (the FMU carries the others).
+    """
+
+    platforms: tuple[str, ...]
+    failed: tuple[str, ...]
+
+
+def compile_binaries(sources: Path, staging: Path, identifier: str, fmi_version: int, *,
+                     cross: bool = False) -> CompiledBinaries:
+    """Compile the FMU's library for the host and, if asked, for every other platform.
+
+    With ziglang the host's library is built by ``zig cc`` too (Linux: against glibc 2.17, so
+    it loads on older distributions), falling back to the machine's compiler if that fails;
+    without ziglang the machine's compiler builds the host's library only. The host's library
+    is required (its failure raises); a failing cross target is left out and named in one
+    warning line.
+
+    Parameters
+    ----------
+    sources : Path
+        Folder written by :func:`write_sources`.
+    staging : Path
+        The unpacked FMU; libraries go to ``staging/binaries/<platform>/``.
+    identifier : str
+        The model identifier (the library's base name).
+    fmi_version : int
+        2 or 3.
+    cross : bool
+        Cross-compile for every platform of :data:`~panto.build_fmu.package.PLATFORMS`.
+
+    Returns
+    -------
+    CompiledBinaries
+
+    Raises
+    ------
+    CompilationError
+        If the host's library does not compile.
+    """
+    host = host_platform()
+    entries = PLATFORMS if cross else (host,) if host is not None else ()
+    if find_zig() is None or not entries:
+        compile_library(sources, staging / make_binary_path(identifier, fmi_version))
+        return CompiledBinaries((host.fmi3_tuple,) if host else (), ())
+    built: dict[str, Path] = {}
+    failed: dict[str, str] = {}
+    with tempfile.TemporaryDirectory(prefix="xc_") as scratch, \
+            ThreadPoolExecutor(max_workers=min(len(entries), os.cpu_count() or 1)) as pool:
+        jobs = {entry: pool.submit(compile_library, sources, Path(scratch) / entry.fmi3_tuple
+                                   / f"{identifier}{entry.extension}",
+                                   zig_target=entry.zig_target) for entry in entries}
+        for entry, job in jobs.items():
+            try:
+                built[entry.fmi3_tuple] = job.result()
+            except CompilationError as error:
+                if entry != host:
+                    failed[entry.fmi3_tuple] = _first_message(str(error))
+                    continue
+                LOGGER.info("zig cc failed for the host, using the native compiler")
+                compile_library(sources, staging / make_binary_path(identifier, fmi_version))
+        _place_libraries(built, staging, identifier, fmi_version)
+    if failed:
+        LOGGER.warning("%s (FMI %d.0): no binary for %s (%s)", identifier, fmi_version,
+                       ", ".join(failed), "; ".join(sorted(set(failed.values()))))
+    return CompiledBinaries(tuple(built) if host is None or host.fmi3_tuple in built else
+                            (host.fmi3_tuple, *built), tuple(failed))
+
+
+def _first_message(text: str) -> str:
+    """The first error line of a :class:`CompilationError` text (else its first line)."""
+    lines = [line.strip() for line in text.splitlines()[2:] if line.strip()]
+    errors = [line for line in lines if "error" in line.lower()]
+    return (errors or lines or text.splitlines())[0]
+
+
+def _place_libraries(built: dict[str, Path], staging: Path, identifier: str,
+                     fmi_version: int) -> None:
+    """Copy each built library to its folder; FMI 2.0's darwin64 gets both macOS slices."""
+    by_tuple = {entry.fmi3_tuple: entry for entry in PLATFORMS}
+    darwin64 = []
+    for name, library in built.items():
+        entry = by_tuple[name]
+        target = platform_binary_path(identifier, fmi_version, entry)
+        if fmi_version == 2 and entry.fmi2_folder == "darwin64":
+            darwin64.append(library)
+        elif target is not None:
+            (staging / target).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copyfile(library, staging / target)
+    if darwin64:
+        target = staging / platform_binary_path(identifier, 2, by_tuple["x86_64-darwin"])
+        write_universal_library(darwin64, target)
+
+
+#: Mach-O universal ("fat") header magic and the slice alignment (2**14, arm64's page size).
+_FAT_MAGIC = 0xCAFEBABE
+_MACHO_MAGIC_64 = 0xFEEDFACF
+_FAT_ALIGN = 14
+
+
+def write_universal_library(slices: list[Path], output: Path) -> Path:
+    """Join thin 64-bit Mach-O libraries into one universal (fat) library, as ``lipo`` does.
+
+    Parameters
+    ----------
+    slices : list of Path
+        Thin Mach-O files of different architectures.
+    output : Path
+        The universal library to write (its folder is created).
+
+    Returns
+    -------
+    Path
+        ``output``.
+    """
+    blobs = [path.read_bytes() for path in slices]
+    header = bytearray(struct.pack(">II", _FAT_MAGIC, len(blobs)))
+    body = bytearray()
+    offset = len(header) + 20 * len(blobs)
+    for blob in blobs:
+        magic, cputype, cpusubtype = struct.unpack_from("<IiI", blob)
+        if magic != _MACHO_MAGIC_64:
+            raise ValueError(f"not a thin 64-bit Mach-O file (magic {magic:#x})")
+        start = -(-(offset + len(body)) // 2 ** _FAT_ALIGN) * 2 ** _FAT_ALIGN
+        body += bytes(start - offset - len(body)) + blob
+        header += struct.pack(">iIIII", cputype, cpusubtype, start, len(blob), _FAT_ALIGN)
+    output.parent.mkdir(parents=True, exist_ok=True)
+    output.write_bytes(bytes(header) + bytes(body))
     return output

@@ -36,7 +36,8 @@ def run_build_fmu(args: argparse.Namespace) -> int:
     from panto.build_fmu.project import build_project_fmus
 
     built = build_project_fmus(args.out, names=args.models or _all_fmus(),
-                               fmi_versions=args.fmi_version, progress=progress)
+                               fmi_versions=args.fmi_version, progress=progress,
+                               cross=not args.host_only)
     failed = [b for b in built if b.problems]
     for b in failed:
         say(f"INVALID {b.path}: " + "; ".join(b.problems))
@@ -146,6 +147,9 @@ def _parser() -> tuple[argparse.ArgumentParser, dict[str, Callable]]:
     p.add_argument("--models", nargs="*", help="subset, e.g. Pantograph TwoMass")
     p.add_argument("--fmi-version", type=int, nargs="+", choices=(2, 3), default=[2, 3],
                    help="FMI versions to build (default: 2 3)")
+    p.add_argument("--host-only", action="store_true",
+                   help="only this machine's binary (default: also Windows, macOS and aarch64 "
+                        "Linux, cross-compiled with ziglang)")
 
     p = add("linearise", run_linearise, "equilibrium, eigenvalues and A, B, C, D at (eta, p)")
     p.add_argument("--model", default="Pantograph", choices=("Pantograph", "TwoMass", "ThreeMass"),
