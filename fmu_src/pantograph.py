@@ -152,6 +152,12 @@ def _centroids(kin: dict) -> list[tuple[sp.Expr, sp.Expr, sp.Expr]]:
     ]
 
 
+def _linkage_guard(kin: dict) -> Guard:
+    """The closure check of the four-bar linkage (both excitation forms)."""
+    return Guard(kin["discriminant"], "the linkage cannot close at phi1 = {phi1} rad, delta = "
+                 "{delta} m (thrust rod and arms out of reach)")
+
+
 @lru_cache(maxsize=1)
 def derive_pantograph() -> MechanicalModel:
     """Derive the equations of motion of the extended pantograph model (section 2.5).
@@ -243,9 +249,7 @@ def _pantograph_model(kin: dict, mass: sp.Matrix, forces: sp.Matrix, contact: sp
         parameters=PARAMETERS, mass_matrix=mass, forces=forces,
         output_expressions=sp.Matrix([y_cb, xi, contact]),
         dependents=dependents,
-        guards=(Guard(kin["discriminant"],
-                      "the linkage cannot close at phi1 = {phi1} rad, delta = {delta} m "
-                      "(thrust rod and arms out of reach)"),),
+        guards=(_linkage_guard(kin),),
         energy=energy,
         extra={
             "y_cb": y_cb, "x_cb": kin["x_cb"], "linkage": kin,
@@ -324,9 +328,7 @@ def derive_pantograph_force() -> MechanicalModel:
         outputs=FORCE_OUTPUTS, parameters=FORCE_PARAMETERS, mass_matrix=mass, forces=forces,
         output_expressions=sp.Matrix([kin["y_cb"], xi, velocity_cb, dxi]),
         dependents=dependents,
-        guards=(Guard(kin["discriminant"],
-                      "the linkage cannot close at phi1 = {phi1} rad, delta = {delta} m "
-                      "(thrust rod and arms out of reach)"),),
+        guards=(_linkage_guard(kin),),
         energy=energy,
         extra={
             "y_cb": kin["y_cb"], "x_cb": kin["x_cb"], "linkage": kin, "holding_torque": holding,
