@@ -24,7 +24,7 @@ from panto.fmu_src.pantograph import PHI1_SEARCH_RANGE, derive_pantograph, deriv
 from panto.fmu_src.parameters import ParameterError, ParameterSet
 from panto.fmu_src.sparsity import jacobian_structure
 from panto.fmu_src.spec import ModelSpec, Variable
-from panto.fmu_src.symbolic import MechanicalModel
+from panto.fmu_src.symbolic import MechanicalModel, cached_derivation
 
 #: Models by name, each with the function that derives it.
 DERIVATIONS = {
@@ -78,7 +78,7 @@ STATE_NOMINALS = {
 def symbolic_model(name: str) -> MechanicalModel:
     """The symbolic model called ``name`` (one of :data:`MODEL_NAMES`)."""
     try:
-        return DERIVATIONS[name]()
+        return cached_derivation(name, DERIVATIONS[name])
     except KeyError:
         raise ValueError(f"unknown model {name!r}; choose one of {list(MODEL_NAMES)}") from None
 

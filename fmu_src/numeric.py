@@ -3,17 +3,29 @@
 This is the Python path for fitting scripts. It is compiled (``sympy.lambdify``) from the same
 :class:`~panto.fmu_src.symbolic.MechanicalModel` as the C code of the FMUs, so the two paths share the
 equations but not the code that evaluates them.
+
+Compiling takes half a minute for the pantograph, so the compiled generated code is cached on
+disk (``$PANTO_NUMERIC_CACHE``, default ``~/.cache/panto/numeric``) under a hash of the model's
+expressions and of this code (:func:`cache_key`); later processes load it in milliseconds.
 """
 from __future__ import annotations
 
+import builtins
+import hashlib
+import inspect
+import importlib.util
+import marshal
+import sys
 from dataclasses import dataclass
-from functools import cached_property
+from functools import cached_property, lru_cache
+from pathlib import Path
 
 import numpy as np
 import sympy as sp
 from scipy import linalg, optimize
 
-from panto.fmu_src.symbolic import MechanicalModel
+from panto.fmu_src.symbolic import (MechanicalModel, default_cache_dir, prune, read_verified,
+                                    write_atomic)
 
 
 class ModelEvaluationError(ValueError):
@@ -72,6 +84,130 @@ def _as_lists(expression):
     return expression
 
 
+# --- cache of the compiled functions ----------------------------------------------------------
+
+#: Bumped when the layout of a cache file changes.
+_CACHE_FORMAT = 1
+
+
+def _digest_expression(expression, memo: dict) -> bytes:
+    """Structural SHA-256 of a SymPy expression, stable across processes.
+
+    Shared sub-expressions are hashed once (``memo`` is keyed by object id; the caller keeps the
+    expressions alive), so the 35 000-node pantograph takes milliseconds where ``srepr`` takes
+    half a second.
+    """
+    if expression is None:
+        return b"None"
+    key = id(expression)
+    if key not in memo:
+        if isinstance(expression, sp.MatrixBase):
+            expression = sp.ImmutableMatrix(expression)
+        elif not isinstance(expression, sp.Basic):
+            expression = sp.sympify(expression)
+        if expression.args:
+            parts = b"".join(_digest_expression(a, memo) for a in expression.args)
+        else:
+            parts = sp.srepr(expression).encode()  # atoms: symbol name and assumptions, numbers
+        memo[key] = (hashlib.sha256(type(expression).__name__.encode() + b"(" + parts + b")")
+                     .digest(), expression)
+    return memo[key][0]
+
+
+@lru_cache(maxsize=1)
+def _code_digest() -> bytes:
+    """Hash of the code that turns a model into functions (this module and the derivatives)."""
+    here = Path(__file__).resolve().parent
+    digest = hashlib.sha256(f"{_CACHE_FORMAT} {sp.__version__} {sys.version}".encode())
+    digest.update(importlib.util.MAGIC_NUMBER)  # the bytecode format of the cached code
+    for name in ("numeric.py", "symbolic.py"):
+        digest.update((here / name).read_bytes())
+    return digest.digest()
+
+
+def cache_key(model: MechanicalModel) -> str:
+    """Key of a model's compiled functions: a hash of its expressions and of the compiling code.
+
+    Every expression the functions are derived from enters the key (mass matrix, forces,
+    outputs, energy, dependents with their partials, guards, the initial-guess height, the
+    symbols and their order), so a changed model never meets a stale cache file.
+    """
+    memo: dict = {}
+    digest = hashlib.sha256(_code_digest() + model.name.encode())
+    parts = [model.p, model.q, model.v, model.u, model.mass_matrix, model.forces,
+             model.output_expressions, model.energy, [g.expression for g in model.guards]]
+    for dependent in model.dependents:
+        partials = sorted(dependent.partials.items(), key=lambda item: str(item[0]))
+        parts += [dependent.symbol, dependent.expression, [k for k, _ in partials],
+                  [v for _, v in partials]]
+    bisect = model.extra.get("initial_guess", {}).get("bisect")
+    parts.append(bisect[1] if bisect else None)
+    for part in parts:
+        items = part if isinstance(part, (list, tuple)) else [part]
+        digest.update(b"[" + b"".join(_digest_expression(item, memo) for item in items) + b"]")
+    return digest.hexdigest()[:24]
+
+
+@lru_cache(maxsize=1)
+def _namespace() -> dict:
+    """The globals lambdify gives a ``modules="math"`` function (math, its translations)."""
+    return dict(sp.lambdify((), 0.0, modules="math").__globals__)
+
+
+def _code_objects(functions, filename: str):
+    """Compiled generated source of each function (same nesting as ``functions``)."""
+    if functions is None:
+        return None
+    if isinstance(functions, list):
+        return [_code_objects(f, filename) for f in functions]
+    names = set(functions.__code__.co_names)
+    if not names <= set(_namespace()) | set(dir(builtins)):
+        raise ValueError(f"generated code uses names outside the math namespace: {sorted(names)}")
+    return compile(inspect.getsource(functions), filename, "exec")
+
+
+def _functions_from_code(code):
+    """Functions from the compiled generated sources (inverse of :func:`_code_objects`)."""
+    if code is None:
+        return None
+    if isinstance(code, list):
+        return [_functions_from_code(c) for c in code]
+    namespace = dict(_namespace())
+    exec(code, namespace)  # noqa: S102 - our own generated code, checked by its digest
+    return namespace["_lambdifygenerated"]
+
+
+def read_cached_functions(path: Path, key: str) -> dict | None:
+    """The compiled functions stored in ``path``, or None if missing, stale or corrupted.
+
+    The file is the SHA-256 of its payload followed by the payload (``marshal`` of the key and
+    the code objects of the generated source); a file whose digest or key does not match is
+    never unmarshalled or executed.
+    """
+    payload = read_verified(path)
+    if payload is None:
+        return None
+    try:
+        stored = marshal.loads(payload)
+        if stored.get("key") != key:
+            return None
+        return {name: _functions_from_code(code) for name, code in stored["functions"].items()}
+    except (ValueError, EOFError, KeyError, TypeError, AttributeError):
+        return None
+
+
+def write_cached_functions(path: Path, key: str, functions: dict) -> bool:
+    """Store the compiled generated source atomically (temporary file + rename).
+
+    Returns False (and leaves no file) if the cache folder is not writable.
+    """
+    try:
+        code = {name: _code_objects(f, str(path)) for name, f in functions.items()}
+    except (OSError, ValueError, TypeError):  # source not retrievable or foreign names
+        return False
+    return write_atomic(path, marshal.dumps({"key": key, "functions": code}))
+
+
 class NumericModel:
     """Numerical evaluation of a :class:`MechanicalModel` for a given parameter vector.
 
@@ -79,15 +215,25 @@ class NumericModel:
     ----------
     model : MechanicalModel
         The symbolic model.
+    cache_dir : str or Path or None or False, optional
+        Folder of the compiled-function cache (default :func:`default_cache_dir`); ``False``
+        compiles without reading or writing the cache.
 
     Notes
     -----
     All methods take the parameter vector ``p`` in the order of ``model.parameters`` (see
     :meth:`panto.fmu_src.parameters.ParameterSet.vector`).
+
+    Compiling the pantograph (``sympy.lambdify`` with common-subexpression elimination, after
+    the exact Jacobians) takes about half a minute, so the generated source is stored in the
+    cache folder under :func:`cache_key` and executed again by later processes.
     """
 
-    def __init__(self, model: MechanicalModel):
+    def __init__(self, model: MechanicalModel, cache_dir: str | Path | None | bool = None):
         self.model = model
+        self.cache_dir = cache_dir
+        #: Where the compiled functions came from: ``"compiled"`` or ``"cache"``.
+        self.source = None
         self.nq = len(model.q)
         self.nu = len(model.u)
         self.ny = len(model.outputs)
@@ -100,7 +246,25 @@ class NumericModel:
 
     @cached_property
     def _functions(self) -> dict:
+        if self.cache_dir is False:
+            self.source = "compiled"
+            return self._compile_all()
+        folder = default_cache_dir() if self.cache_dir is None else Path(self.cache_dir)
+        key = cache_key(self.model)
+        path = folder / f"{self.model.name}-{key}.bin"
+        functions = read_cached_functions(path, key)
+        if functions is not None:
+            self.source = "cache"
+            return functions
+        functions = self._compile_all()
+        if write_cached_functions(path, key, functions):
+            prune(folder, f"{self.model.name}-*.bin")
+        self.source = "compiled"
+        return functions
+
+    def _compile_all(self) -> dict:
         m = self.model
+        bisect = m.extra.get("initial_guess", {}).get("bisect")
         drdq, drdv, drdu = m.forces_jacobian
         dydq, dydv, dydu = m.outputs_jacobian
         return {
@@ -113,6 +277,7 @@ class NumericModel:
             "outputs": self._compile(m.output_expressions),
             "outputs_jacobian": self._compile([dydq, dydv, dydu]),
             "energy": None if m.energy is None else self._compile(m.energy),
+            "height": None if bisect is None else self._compile(bisect[1]),
         }
 
     def dependents(self, p, q) -> list[float]:
@@ -199,9 +364,9 @@ class NumericModel:
                       for s in self.model.q])
         if "bisect" not in guess:
             return q
-        name, height, target, low, high = guess["bisect"]
+        name, _, target, low, high = guess["bisect"]
         k = [s.name for s in self.model.q].index(name)
-        height_of = self._compile(height)
+        height_of = self._functions["height"]
 
         def reach(value: float) -> float:
             trial = q.copy()

@@ -16,8 +16,15 @@ which keeps the expressions small and the derivatives exact.
 """
 from __future__ import annotations
 
+import hashlib
+import os
+import pickle
+import sys
+import tempfile
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import cached_property, lru_cache
+from pathlib import Path
 
 import sympy as sp
 
@@ -188,3 +195,109 @@ def lagrangian_forces(
         mass_rate += dM * vl
     centrifugal = sp.Matrix([(v.T * dM * v)[0, 0] / 2 for dM in mass_matrix_derivative])
     return generalised_forces - mass_rate * v + centrifugal
+
+
+# --- cache of derived models ------------------------------------------------------------------
+
+#: Environment variable naming the cache folder of derived and compiled models (default
+#: ``~/.cache/panto/numeric``).
+CACHE_VARIABLE = "PANTO_NUMERIC_CACHE"
+_DERIVED: dict[str, MechanicalModel] = {}
+
+
+def default_cache_dir() -> Path:
+    """``$PANTO_NUMERIC_CACHE`` or ``~/.cache/panto/numeric``."""
+    return Path(os.environ.get(CACHE_VARIABLE) or Path.home() / ".cache" / "panto" / "numeric")
+
+
+def read_verified(path: Path) -> bytes | None:
+    """Payload of a file written by :func:`write_atomic`; None if missing or corrupted.
+
+    The file is the SHA-256 of the payload followed by the payload.
+    """
+    try:
+        data = path.read_bytes()
+    except OSError:
+        return None
+    return data[32:] if len(data) > 32 and hashlib.sha256(data[32:]).digest() == data[:32] else None
+
+
+def write_atomic(path: Path, payload: bytes) -> bool:
+    """Write ``sha256(payload) + payload`` via a temporary file and a rename.
+
+    Parallel processes (pytest-xdist workers) never see half a file. Returns False, leaving no
+    file, if the folder is not writable.
+    """
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        handle, scratch = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
+    except OSError:
+        return False
+    try:
+        with os.fdopen(handle, "wb") as stream:
+            stream.write(hashlib.sha256(payload).digest() + payload)
+        os.chmod(scratch, 0o644)
+        os.replace(scratch, path)
+        return True
+    except OSError:
+        return False
+    finally:
+        if os.path.exists(scratch):
+            os.unlink(scratch)
+
+
+def prune(folder: Path, pattern: str, keep: int = 4) -> None:
+    """Delete all but the ``keep`` newest files matching ``pattern`` (stale source versions).
+
+    A compiled pantograph is 13 MB and every edit of the model sources makes a new one.
+    """
+    try:
+        files = sorted(folder.glob(pattern), key=lambda f: f.stat().st_mtime, reverse=True)
+        for stale in files[keep:]:
+            stale.unlink(missing_ok=True)
+    except OSError:  # another process pruned it first
+        pass
+
+
+@lru_cache(maxsize=1)
+def source_digest() -> str:
+    """Hash of the model sources (every ``fmu_src/*.py``), SymPy's and Python's versions."""
+    digest = hashlib.sha256(f"{sp.__version__} {sys.version}".encode())
+    for path in sorted(Path(__file__).resolve().parent.glob("*.py")):
+        digest.update(path.name.encode() + path.read_bytes())
+    return digest.hexdigest()[:24]
+
+
+def cached_derivation(name: str, derive: Callable[[], MechanicalModel],
+                      cache_dir: str | Path | None = None) -> MechanicalModel:
+    """The model ``derive()`` returns, pickled in the cache folder for later processes.
+
+    The derivation of the pantograph takes about a second in SymPy; the pickle loads in
+    milliseconds. The file is keyed by :func:`source_digest`, so any change of the model
+    sources derives again; a corrupted file is derived again and replaced.
+
+    Parameters
+    ----------
+    name : str
+        Model name (part of the file name).
+    derive : callable
+        Derivation without arguments.
+    cache_dir : str or Path, optional
+        Cache folder (default :func:`default_cache_dir`).
+    """
+    path = Path(cache_dir or default_cache_dir()) / f"{name}-{source_digest()}.model.pickle"
+    if str(path) in _DERIVED:
+        return _DERIVED[str(path)]
+    payload = read_verified(path)
+    model = None
+    if payload is not None:
+        try:
+            model = pickle.loads(payload)  # noqa: S301 - our own file, checked by its digest
+        except Exception:  # noqa: BLE001 - a bad pickle is rebuilt, whatever it raises
+            model = None
+    if not isinstance(model, MechanicalModel) or model.name != name:
+        model = derive()
+        if write_atomic(path, pickle.dumps(model, protocol=pickle.HIGHEST_PROTOCOL)):
+            prune(path.parent, f"{name}-*.model.pickle")
+    _DERIVED[str(path)] = model
+    return model
