@@ -162,7 +162,7 @@ def run_doe(args: argparse.Namespace) -> int:
     n_samples = int(round(args.duration / constraints.sample_period))
     model = _model(args, constraints, n_samples)
     say(f"{model.structure_name}: designing for {list(model.parameter_names)}, "
-        f"{args.duration} s, rig limits {constraints}")
+        f"{args.duration} s, rig limits: {constraints.describe()}")
     if args.discriminate:
         return _discriminate(args, model, constraints, out)
     from panto.identification.design.pantograph import design_pantograph_experiment

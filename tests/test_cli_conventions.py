@@ -114,3 +114,14 @@ def test_a_closed_pipe_ends_quietly(tmp_path):
     child.stdout.close()  # the reader is gone before the first line is written
     error = child.stderr.read().decode()
     assert child.wait(timeout=120) == 141 and error == ""
+
+
+def test_rig_limits_are_printed_with_units_and_no_python_reprs():
+    import numpy as np
+
+    from panto.identification.design.constraints import RigInputConstraints
+
+    text = RigInputConstraints.from_rig(minimum_contact_force=np.float64(20.0)).describe()
+    assert "np." not in text and "float64" not in text and "(" in text
+    for piece in ("m/s", "bar", "minimum contact force 20 N", "sample period"):
+        assert piece in text, piece

@@ -81,6 +81,17 @@ class RigInputConstraints:
             if not ok:
                 raise ValueError(f"RigInputConstraints.{name} = {getattr(self, name)!r}: {problem}")
 
+    def describe(self) -> str:
+        """The limits in one line with units (for progress lines and reports)."""
+        force = "none" if self.minimum_contact_force is None else \
+            f"{float(self.minimum_contact_force):g} N"
+        return (f"motor {float(self.motor_min):g} .. {float(self.motor_max):g} m, "
+                f"{float(self.motor_speed):g} m/s, {float(self.motor_acceleration):g} m/s^2; "
+                f"pressure {float(self.pressure_min):g} .. {float(self.pressure_max):g} bar "
+                f"(start {float(self.pressure_start):g} bar); holds >= {float(self.motor_hold):g} s "
+                f"(motor), {float(self.pressure_hold):g} s (pressure); sample period "
+                f"{float(self.sample_period):g} s; minimum contact force {force}")
+
     @property
     def smoothing_samples(self) -> int:
         """Moving-average length :math:`L = \\lceil 2 v_\\max / (a_\\max T) \\rceil` (>= 1)."""
