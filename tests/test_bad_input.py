@@ -200,3 +200,20 @@ def test_parameter_units_are_converted_not_ignored(files):
     assert in_g["m_c"] == pytest.approx(7.0, rel=1e-12) and in_kg["m_c"] == 7.0
     assert in_g["m_c"] != default_parameters("Pantograph")["m_c"]
     assert all(in_g[name] == in_kg[name] for name in in_kg.names)
+
+
+def test_diagnosing_a_run_against_itself_warns_that_nothing_is_withheld():
+    import numpy as np
+    from scipy import signal
+
+    from panto.identification.diagnosis.pipeline import DiagnosisOptions, diagnose
+    from panto.identification.estimation.base import IdentificationData
+
+    rng = np.random.default_rng(0)
+    u = signal.lfilter([1.0], [1.0, -0.9], rng.normal(size=600))
+    y = signal.lfilter([0.2], [1.0, -0.8], u) + 0.01 * rng.normal(size=600)
+    run = IdentificationData(np.arange(600) * 0.01, u[:, None], y[:, None], ("u",), ("y",))
+    lines: list[str] = []
+    diagnose(run, run, structure="linear-2", progress=lines.append,
+             options=DiagnosisOptions(max_effects=1, max_refits=1, discovery=False))
+    assert any("WARNING: the validation run is the training run" in line for line in lines)

@@ -282,6 +282,9 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
     started = time.perf_counter()
     say = progress or (lambda line: None)
     _check_runs(train, validation)
+    if _same_run(train, validation):
+        say("diagnose: WARNING: the validation run is the training run; nothing is withheld, so "
+            "the withheld-data tests cannot judge an effect (give a different run)")
     nominal, free = build_structure(structure, train, dict(structure_options or {}))
     roles = options.roles or default_roles(nominal, train)
     candidates = _uncovered(options.candidates, nominal, say)
@@ -324,6 +327,13 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
         tuple(analysis_before), tuple(analysis_after),
         {"time": validation.time, "measured": validation.outputs, "before": before,
          "after": current}, adequacy.to_dict() if adequacy else None, hypothesis)
+
+
+def _same_run(train: IdentificationData, validation: IdentificationData) -> bool:
+    """Whether the two runs hold the same samples (the same file given twice)."""
+    return train.inputs.shape == validation.inputs.shape and \
+        np.array_equal(train.inputs, validation.inputs, equal_nan=True) and \
+        np.array_equal(train.outputs, validation.outputs, equal_nan=True)
 
 
 def _check_runs(train: IdentificationData, validation: IdentificationData) -> None:
