@@ -217,3 +217,18 @@ def test_diagnosing_a_run_against_itself_warns_that_nothing_is_withheld():
     diagnose(run, run, structure="linear-2", progress=lines.append,
              options=DiagnosisOptions(max_effects=1, max_refits=1, discovery=False))
     assert any("WARNING: the validation run is the training run" in line for line in lines)
+
+
+def test_more_free_parameters_than_samples_is_refused_not_a_success():
+    import numpy as np
+
+    from panto.identification.estimation.base import IdentificationData, IdentificationError
+    from panto.identification.estimation.least_squares import fit_least_squares
+    from panto.identification.structures.oscillators import OscillatorStructure
+
+    structure = OscillatorStructure(3, outputs=("F_c",))
+    t = np.arange(5) * 0.02
+    data = IdentificationData(t, np.column_stack([np.full(5, 1.8), np.full(5, 4.0)]),
+                              np.linspace(80, 81, 5)[:, None], ("eta", "p"), ("F_c",))
+    with pytest.raises(IdentificationError, match="5 measured output samples for 11 free"):
+        fit_least_squares(structure, data, free=structure.default_free())

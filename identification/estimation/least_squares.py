@@ -304,6 +304,11 @@ def make_problem(structure: ModelStructure, data: IdentificationData, free: Sequ
     if missing:
         raise IdentificationError(f"{data.source or 'data'}: output(s) {missing} are not simulated "
                                   f"by {structure.name} (it has {list(structure.output_names)})")
+    measured = int(np.isfinite(np.asarray(data.outputs, float)).sum())
+    if measured <= len(free):
+        raise IdentificationError(f"{data.source or 'data'}: {measured} measured output samples for "
+                                  f"{len(free)} free parameters; a fit needs more samples than "
+                                  "parameters (give a longer run or fix parameters)")
     base = {**structure.nominal(), **{k: float(v) for k, v in (initial or {}).items()}}
     limits = {**structure.bounds(), **{k: tuple(map(float, v)) for k, v in (bounds or {}).items()}}
     lower = np.array([limits[n][0] for n in free], float)
