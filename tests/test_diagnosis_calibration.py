@@ -76,10 +76,12 @@ def test_a_drifting_force_gain_is_unexplained():
     assert result.gap["significant"], lines
     assert result.gap["per_output"]["F_c"]["systematic_cost"] >= RELEVANCE
     assert result.verdict == "unexplained", lines
-    # the discovery library is searched; a time-varying gain has no term in it, and a term that
-    # does not gain on the withheld run is never reported
-    assert any("searching the discovery library" in line for line in lines)
-    assert result.discovery is None or result.discovery["gain"] > 0
+    # the nominal here is one Levenberg-Marquardt run from the defaults: a black box of its order
+    # fits the training run clearly better (F_c 90.4 vs 93.9 %), so the discovery library is not
+    # searched - any term would absorb the nominal's own misfit - and the report says why
+    assert result.discovery is not None and result.discovery["term"] is None, lines
+    assert result.discovery["adequacy"]["verdict"] == "not converged"
+    assert "Discovery not run" in result.summary and "--global-fit" in result.summary
 
 
 def test_systematic_cost_of_a_known_residual():
