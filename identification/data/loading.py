@@ -266,7 +266,8 @@ def _window(data: IdentificationData, options: LoadOptions) -> IdentificationDat
 def _table_data(where: str, table: Mapping[str, np.ndarray],
                 options: LoadOptions) -> IdentificationData:
     """A plain table's columns on its time base, rows selected, decimated."""
-    from panto.identification.data.preprocessing import decimate_zero_phase
+    from panto.identification.data.preprocessing import (butterworth_zero_phase,
+                                                         decimate_zero_phase)
 
     inputs, outputs = dict(options.inputs), dict(options.outputs)
     _check_named(where, options, table)
@@ -287,7 +288,11 @@ def _table_data(where: str, table: Mapping[str, np.ndarray],
     u = np.column_stack([table[c] for c in inputs.values()])
     y = np.column_stack([table[c] for c in outputs.values()])
     if options.lowpass:
-        u, y = (_lowpass(where, x, options.lowpass, time_column) for x in (u, y))
+        rate = 1.0 / float(time_column[1] - time_column[0])
+        try:
+            u, y = (butterworth_zero_phase(x, options.lowpass, rate) for x in (u, y))
+        except ValueError as error:
+            raise ValueError(f"{where}: {error}") from None
     u, y, t = u[options.rows], y[options.rows], time_column[options.rows]
     if len(t) < 2:
         raise ValueError(f"{where}: rows {options.rows.start}:{options.rows.stop} keep {len(t)} of "
@@ -297,17 +302,6 @@ def _table_data(where: str, table: Mapping[str, np.ndarray],
         if factor > 1:
             t, u, y = t[::factor], decimate_zero_phase(u, factor), decimate_zero_phase(y, factor)
     return IdentificationData(t - t[0], u, y, tuple(inputs), tuple(outputs), source=where)
-
-
-def _lowpass(where: str, x: np.ndarray, cutoff: float, time: np.ndarray) -> np.ndarray:
-    """`x` through the zero-phase low-pass of :attr:`LoadOptions.lowpass`."""
-    from scipy import signal
-
-    nyquist = 0.5 / float(time[1] - time[0])
-    if cutoff >= nyquist:
-        raise ValueError(f"{where}: lowpass {cutoff:g} Hz: must be below the Nyquist frequency "
-                         f"{nyquist:g} Hz of the record")
-    return signal.sosfiltfilt(signal.butter(4, cutoff / nyquist, output="sos"), x, axis=0)
 
 
 def _why_missing(where: str, missing: list[str]) -> str:

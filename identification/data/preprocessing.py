@@ -162,6 +162,24 @@ def lowpass_zero_phase(x: np.ndarray, sample_rate: float, *, stopband: float = 2
     return signal.sosfiltfilt(design.sos, x, axis=axis, padlen=padlen)
 
 
+def butterworth_zero_phase(x: np.ndarray, cutoff: float, sample_rate: float, *, order: int = 4,
+                           axis: int = 0) -> np.ndarray:
+    """`x` through a Butterworth low-pass of `order` at `cutoff` [Hz], forward and backward.
+
+    A fixed filter given by its cut-off, as benchmarks prescribe their prefilters (EMPS: Janot et
+    al. 2019, 4th order at 25 Hz), where :func:`lowpass_zero_phase` designs the order from band
+    edges. Raises :class:`ValueError` when `cutoff` is not below the Nyquist frequency.
+    """
+    from scipy import signal
+
+    nyquist = 0.5 * sample_rate
+    if not 0.0 < cutoff < nyquist:
+        raise ValueError(f"lowpass {cutoff:g} Hz: must be below the Nyquist frequency "
+                         f"{nyquist:g} Hz of the record")
+    sos = signal.butter(order, cutoff / nyquist, output="sos")
+    return signal.sosfiltfilt(sos, np.asarray(x, float), axis=axis)
+
+
 def decimate_zero_phase(x: np.ndarray, factor: int, *, axis: int = 0) -> np.ndarray:
     """Every `factor`-th sample of `x` (from the first) after a zero-phase anti-aliasing filter.
 
