@@ -26,7 +26,7 @@ def identify_models(state: dict[str, Any], progress: Progress) -> dict:
     from panto.identification.data.datasets import pantograph_data
     from panto.identification.structures.physical import PhysicalLinear
     from panto.identification.structures.registry import comparison_identifiers, parameter_set
-    from panto.identification.estimation.reporting import write_identification
+    from panto.identification.estimation.reporting import parameter_records, write_identification
 
     out, settings = state["out"], state["settings"]
     train = pantograph_data(state["runs"]["training"], rate=50.0)
@@ -66,7 +66,7 @@ def identify_models(state: dict[str, Any], progress: Progress) -> dict:
                      "parameter_file": str(paths["parameters"].relative_to(out)),
                      "not_identifiable": (result.details.get("identifiability") or {})
                      .get("not_identifiable") or {},
-                     "estimates": [e.to_dict() for e in result.estimates.values()],
+                     "estimates": parameter_records(result),
                      "fixed_at_prior": dict(result.details.get("fixed_at_prior", {})),
                      "verdict_rule": (result.details.get("identifiability") or {}).get("rule")},
         "plots": {"fit": "identification/fit.png", "comparison": "comparison/comparison.png"}}
@@ -104,6 +104,7 @@ def _pareto(structure: Any, train: Any, out: Any, settings: Any, progress: Progr
     return {"front_size": len(pareto.front), "evaluations": pareto.n_evaluations,
             "knee_fit": dict(picked.fit), "polished_fit": dict(polished.fit),
             "objectives": np.asarray(pareto.objectives).tolist(),
+            "objective_names": list(picked.fit),
             "plot": "identification/pareto.png"}
 
 
@@ -119,8 +120,8 @@ def _sensitivity(result: Any, out: Any, progress: Progress) -> dict:
     sensitivity = eigenvalue_sensitivity(result)
     plot_eigenvalue_sensitivity(sensitivity, out / "identification" / "eigenvalues.png")
     sensitivity.write_json(out / "identification" / "eigenvalues.json")
-    progress(f"modes {np.round(sensitivity.natural_frequencies_hz, 2).tolist()} Hz; most "
-             f"influential {sensitivity.ranking[:4]}")
+    progress("modes " + ", ".join(f"{f:.2f}" for f in sensitivity.natural_frequencies_hz)
+             + f" Hz; most influential {', '.join(sensitivity.ranking[:4])}")
     return {"natural_frequencies_hz": sensitivity.natural_frequencies_hz.tolist(),
             "ranking": sensitivity.ranking, "plot": "identification/eigenvalues.png"}
 
@@ -139,7 +140,8 @@ def diagnose_gap(state: dict[str, Any], progress: Progress) -> dict:
                       progress=progress)
     paths = write_report(result, out / "diagnosis")
     closed = result.gap_closed()
-    progress(f"verdict {result.verdict} {list(result.effects)}; validation fit " + ", ".join(
+    progress(f"verdict {result.verdict} ({', '.join(result.effects) or 'no effect'}); "
+             "validation fit " + ", ".join(
         f"{o} {result.fit_before[o]:.1f} -> {result.fit_after[o]:.1f} %"
         for o in result.output_names))
     steps = [{"effect": s.effect, "parameters": dict(s.parameters),
@@ -222,6 +224,7 @@ def design_next_run(state: dict[str, Any], progress: Progress) -> dict:
             "duration_s": settings.doe_duration, "criterion": design.criterion,
             "det_ratio_per_parameter": summary["det_ratio_per_parameter"],
             "median_std_ratio": float(np.median(ratios)), "table": summary["table"],
+            "units": dict(LinearisedPantograph.structure_for("physical-linear").units()),
             "min_contact_force_N": summary["min_contact_force_N"],
             "files": {k: str(p.relative_to(out)) for k, p in paths.items()},
             "plots": [str(p.relative_to(out)) for p in paths.values()

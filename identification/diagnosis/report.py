@@ -1,6 +1,8 @@
-"""The diagnosis as files a person opens: ``report.html`` (self-contained, plots embedded as PNG)
-and ``report.json`` (:meth:`~panto.identification.diagnosis.pipeline.Diagnosis.to_dict`), plus the PNGs beside
-them.
+"""The diagnosis as files a person opens: ``report.html`` (self-contained, plots embedded as PNG,
+rendered from the templates of :mod:`panto.templating`, the look of every report), ``report.json``
+(:meth:`~panto.identification.diagnosis.pipeline.Diagnosis.to_dict`) and
+``validation_series.csv`` (the validation run's outputs, measured, before and after), plus the
+PNGs beside them.
 
 The HTML answers the three questions in order: where the gap lies (validation fit, the residual
 spectra, error model, segments and correlations of the nominal model), which effect causes it
@@ -9,8 +11,6 @@ spectra, error model, segments and correlations of the nominal model), which eff
 """
 from __future__ import annotations
 
-import base64
-import html
 import json
 import math
 from pathlib import Path
@@ -21,26 +21,12 @@ import numpy as np
 from panto.identification.diagnosis.residual_plots import plot_bands, plot_output_analysis, plot_series
 
 
-def _number(value: Any, digits: int = 4) -> str:
-    if isinstance(value, (int, float, np.floating)) and not isinstance(value, bool):
-        return "-" if not math.isfinite(float(value)) else f"{float(value):.{digits}g}"
-    return html.escape(str(value))
-
-
-def _table(header: list[str], rows: list[list[Any]]) -> str:
-    head = "".join(f"<th>{html.escape(h)}</th>" for h in header)
-    body = "".join("<tr>" + "".join(f"<td>{_number(c)}</td>" for c in row) + "</tr>"
-                   for row in rows)
-    return f"<table><tr>{head}</tr>{body}</table>"
-
-
-def _image(path: Path) -> str:
-    data = base64.b64encode(path.read_bytes()).decode("ascii")
-    return f'<img src="data:image/png;base64,{data}" alt="{html.escape(path.name)}">'
-
-
 def write_report(diagnosis: Any, folder: str | Path) -> dict[str, Path]:
-    """Write ``report.json``, the PNG plots and ``report.html`` into `folder`; returns the paths."""
+    """Write ``report.json``, the PNG plots, ``validation_series.csv`` (time, measured, nominal
+    and augmented outputs of the validation run) and ``report.html`` into `folder`; returns the
+    paths."""
+    from panto import templating as t
+
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     json_path = folder / "report.json"
@@ -51,69 +37,107 @@ def write_report(diagnosis: Any, folder: str | Path) -> dict[str, Path]:
     for analysis in diagnosis.analysis_before:
         where_images += [Path(p) for p in plot_output_analysis(
             analysis, folder / f"nominal_{analysis.output_name}")]
-    parts = [_head(diagnosis), "<h2>1. Where the gap lies (nominal model, validation run)</h2>",
-             f"<p>{html.escape(diagnosis.where.get('text', ''))}</p>",
-             "<p>Gap " + ("significant: " + html.escape("; ".join(diagnosis.gap["reasons"]))
-                          if diagnosis.gap["significant"] else "within the noise") + "</p>",
-             _image(images[0])] + [_image(p) for p in where_images]
-    parts += ["<h2>2. Which effect: ranking on the training residual and refits</h2>"]
+    series = write_series(diagnosis, folder / "validation_series.csv")
+    where = [t.paragraph(diagnosis.where.get("text", "")),
+             t.paragraph("Gap " + ("significant: " + "; ".join(diagnosis.gap["reasons"])
+                                   if diagnosis.gap["significant"] else "within the noise")),
+             *[t.figure(p) for p in images + where_images]]
+    sections = [{"title": "1. Where the gap lies (nominal model, validation run)", "blocks": where},
+                {"title": "2. Which effect: ranking on the training residual and refits",
+                 "blocks": _which_blocks(diagnosis)},
+                {"title": "3. How far the gap shrinks (validation run)",
+                 "blocks": _shrink_blocks(diagnosis, bands)}]
+    html_path = folder / "report.html"
+    html_path.write_text(t.render("sections.html.j2", title="Sim-to-real gap diagnosis: "
+                                  f"{diagnosis.structure}", written="", head=_head(diagnosis),
+                                  sections=sections), encoding="utf-8")
+    return {"json": json_path, "html": html_path, "images": images + where_images +
+            ([bands] if bands else []), **({"series": series} if series else {})}
+
+
+def write_series(diagnosis: Any, path: Path) -> Path | None:
+    """The validation run's measured, nominal (before) and augmented (after) outputs over time
+    as a CSV table (``time [s]``, ``<output>_measured``, ``<output>_before``,
+    ``<output>_after``, in the data's units); None without series."""
+    import pandas as pd
+
+    series = diagnosis.series
+    if not series or "time" not in series:
+        return None
+    columns = {"time [s]": np.asarray(series["time"], float)}
+    for j, name in enumerate(diagnosis.output_names):
+        for key in ("measured", "before", "after"):
+            if key in series:
+                columns[f"{name}_{key}"] = np.asarray(series[key], float)[:, j]
+    pd.DataFrame(columns).to_csv(path, index=False)
+    return path
+
+
+def _which_blocks(diagnosis: Any) -> list[dict]:
+    from panto import templating as t
+
+    blocks = []
     for index, round_ in enumerate(diagnosis.rounds):
-        parts.append(f"<h3>Round {index + 1}</h3>")
+        blocks.append(t.heading(f"Round {index + 1}"))
         for output, ranking in round_["ranking"].items():
             rows = [[c["effect"], c["variant"], c["err"], c["significant"]]
                     for c in ranking["candidates"][:6]]
-            parts.append(f"<p>FROLS on {html.escape(output)}</p>" +
-                         _table(["effect", "variant", "ERR", "significant"], rows))
-        rows = [[t["effect"], t["description"], t["delta_bic"], t["significance"],
-                 t["improvement"], t["fold_spread"], "accepted" if t["accepted"] else
-                 "; ".join(t["failed"])] for t in round_["tried"]]
-        parts.append(_table(["effect", "augmentation", "dBIC", "|theta|/sigma",
-                             "validation +points", "fold spread", "decision"], rows))
-    parts.append("<h2>3. How far the gap shrinks (validation run)</h2>")
-    parts.append(_table(["output", "fit before [%]", "fit after [%]", "share of residual energy removed"],
-                        [[o, diagnosis.fit_before[o], diagnosis.fit_after[o],
-                          diagnosis.gap_closed()[o]] for o in diagnosis.output_names]))
+            blocks += [t.paragraph(f"FROLS on {output}"),
+                       t.table(["effect", "variant", "ERR", "significant"], rows)]
+        rows = [[x["effect"], x["description"], x["delta_bic"], x["significance"],
+                 x["improvement"], x["fold_spread"],
+                 t.cell("accepted", "ok") if x["accepted"] else "; ".join(x["failed"])]
+                for x in round_["tried"]]
+        blocks.append(t.table(["effect", "augmentation", "ΔBIC", "|θ|/σ",
+                               "validation gain [points]", "fold spread", "decision"], rows))
+    return blocks
+
+
+def _shrink_blocks(diagnosis: Any, bands: Path | None) -> list[dict]:
+    from panto import templating as t
+
+    closed = diagnosis.gap_closed()
+    blocks = [t.table(["output", "fit before [%]", "fit after [%]",
+                       "share of residual energy removed [%]"],
+                      [[o, diagnosis.fit_before[o], diagnosis.fit_after[o],
+                        _percent(closed[o])] for o in diagnosis.output_names])]
     for step in diagnosis.steps:
         rows = [[n, v, step.std.get(n, math.nan)] for n, v in step.parameters.items()]
-        parts.append(f"<h3>{html.escape(step.effect)}</h3><p>{html.escape(step.description)}</p>"
-                     + _table(["parameter", "value", "std"], rows)
-                     + _table(["output", "fit before", "fit after", "energy removed"],
-                              [[o, step.fit_before[o], step.fit_after[o], step.energy_removed[o]]
-                               for o in step.fit_before]))
+        blocks += [t.heading(step.effect), t.paragraph(step.description),
+                   t.table(["parameter", "value", "± (1 σ)"], rows),
+                   t.table(["output", "fit before [%]", "fit after [%]",
+                            "residual energy removed [%]"],
+                           [[o, step.fit_before[o], step.fit_after[o],
+                             _percent(step.energy_removed[o])] for o in step.fit_before])]
     if bands is not None:
-        parts.append(_image(bands))
+        blocks.append(t.figure(bands))
     if diagnosis.steps:
-        parts.append("<p>Remaining gap: " + (html.escape("; ".join(diagnosis.remaining_gap["reasons"]))
-                                             if diagnosis.remaining_gap["significant"]
-                                             else "within the noise") + "</p>")
-    html_path = folder / "report.html"
-    html_path.write_text("<!DOCTYPE html><html><head><meta charset='utf-8'><title>Diagnosis</title>"
-                         "<style>body{font-family:sans-serif;max-width:1000px;margin:auto}"
-                         "table{border-collapse:collapse;margin:6px 0}td,th{border:1px solid #bbb;"
-                         "padding:2px 6px;font-size:13px}img{max-width:100%}</style></head><body>"
-                         + "\n".join(parts) + "</body></html>")
-    return {"json": json_path, "html": html_path, "images": images + where_images +
-            ([bands] if bands else [])}
+        blocks.append(t.paragraph("Remaining gap: " + ("; ".join(diagnosis.remaining_gap["reasons"])
+                                                       if diagnosis.remaining_gap["significant"]
+                                                       else "within the noise")))
+    return blocks
 
 
-def _head(diagnosis: Any) -> str:
+def _percent(share: Any) -> float | None:
+    """A share (0-1) in percent; None when not finite."""
+    return 100.0 * float(share) if share is not None and math.isfinite(share) else None
+
+
+def _head(diagnosis: Any) -> list[dict]:
+    from panto import templating as t
+
     verdict = {"effect": "effect(s) found", "none": "none: the gap is within the noise",
                "unexplained": "unexplained: a significant gap no candidate closes"}[diagnosis.verdict]
-    return (f"<h1>Sim-to-real gap diagnosis: {html.escape(diagnosis.structure)}</h1>"
-            f"<p><b>Verdict: {html.escape(verdict)}</b>"
-            + (f" &mdash; {html.escape(' then '.join(diagnosis.effects))}" if diagnosis.effects else "")
-            + f"</p><p>{html.escape(diagnosis.summary)}</p>"
-            + _next_experiment(diagnosis)
-            + f"<p>Wall time {diagnosis.wall_time:.1f} s.</p>")
-
-
-def _next_experiment(diagnosis: Any) -> str:
+    found = f" — {' then '.join(diagnosis.effects)}" if diagnosis.effects else ""
+    blocks = [t.paragraph(f"Verdict: {verdict}{found}", "verdict"),
+              t.paragraph(diagnosis.summary)]
     suggestion = diagnosis.next_experiment()
-    if not suggestion:
-        return ""
-    return (f"<p>Next experiment ({html.escape(suggestion['effect'])}, "
-            f"{html.escape(suggestion['status'])}): <code>{html.escape(suggestion['command'])}"
-            f"</code> &mdash; {html.escape(suggestion['why'])}.</p>")
+    if suggestion:
+        blocks.append(t.paragraph(f"Next experiment ({suggestion['effect']}, "
+                                  f"{suggestion['status']}): {suggestion['command']} — "
+                                  f"{suggestion['why']}."))
+    blocks.append(t.paragraph(f"Wall time {diagnosis.wall_time:.1f} s.", "note"))
+    return blocks
 
 
 __all__ = ["write_report"]
