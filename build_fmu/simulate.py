@@ -44,6 +44,7 @@ from panto.fmu_src.response import TimeResponse
 
 from .fmi_plumbing import (STATUS_LABELS, FloatChannel, LogCollector, PiecewiseLinearInputs,
                            make_cvode_solver)
+from .parameter_sources import fmu_parameter_values
 
 INTERFACES = {"CS": "CoSimulation", "ME": "ModelExchange"}
 DEFAULT_ME_TOLERANCE = 1e-6
@@ -316,7 +317,7 @@ class FmuSimulator:
 
     def simulate(self, time: Sequence[float] | np.ndarray,
                  inputs: Mapping[str, Any] | None = None, *,
-                 parameters: Mapping[str, float] | None = None,
+                 parameters: Mapping[str, float] | str | Path | Any | None = None,
                  start_values: Mapping[str, Any] | None = None,
                  output_interval: float | None = None,
                  solver_tolerance: float | None = None) -> TimeResponse:
@@ -330,8 +331,11 @@ class FmuSimulator:
         inputs : mapping of str to array_like or float, optional
             Input name → samples at `time` (shape (n,)) or a constant. Inputs not given are
             held at their start values. Piecewise linear in between (see module notes).
-        parameters : mapping of str to float, optional
-            Parameter name → value, set before initialisation; others keep their defaults.
+        parameters : mapping of str to float, parameter file or identification result, optional
+            Parameter name → value, set before initialisation; others keep their defaults. A
+            parameter file (``parameters.json`` of ``panto identify --out``: units converted,
+            model checked) or an identification result (its values of the FMU's parameters) is
+            read by :func:`panto.build_fmu.parameter_sources.fmu_parameter_values`.
         start_values : mapping of str to float, optional
             Start values of other variables (e.g. initial states), set before initialisation.
         output_interval : float, optional
@@ -362,7 +366,11 @@ class FmuSimulator:
             raise RuntimeError(f"{md.modelName}: the simulator is closed")
         grid = _time_grid(time)
         table = self._input_table(grid, dict(inputs or {}))
-        parameters, start_values = dict(parameters or {}), dict(start_values or {})
+        parameters = fmu_parameter_values(parameters, model=md.modelName,
+                                          parameter_names=self.parameter_names,
+                                          units={n: self.variables[n].unit or ""
+                                                 for n in self.parameter_names})
+        start_values = dict(start_values or {})
         check_names(list(parameters), self.parameter_names, "parameter", md.modelName)
         check_names(list(start_values), list(self.variables), "variable", md.modelName)
         parameters, start_values = self._coerce(parameters), self._coerce(start_values)

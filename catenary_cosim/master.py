@@ -151,6 +151,22 @@ class CosimulationResult:
                     "statistics": self.statistics().to_dict()}
         return TimeResponse(self.time[rows], signals, units=units, metadata=metadata)
 
+    def _repr_html_(self) -> str:
+        """A notebook's view: line, pantograph and speed, then the EN 50318 statistics over the
+        analysed section with their units."""
+        from panto.fmu_src.display import html_block, html_table
+
+        units = {"uplift_max_mm": "mm", "loss_pct": "%"}
+        rows = [[key, value, units.get(key, "N")]
+                for key, value in self.statistics().to_dict().items()]
+        pantograph = self.settings.get("pantograph") or {}
+        setting = (f"line {self.settings.get('line', '?')}, pantograph "
+                   f"{pantograph.get('name', '?')}, {self.settings.get('speed_kmh', math.nan):g} "
+                   f"km/h, section {self.section[0]:g} to {self.section[1]:g} m")
+        table = html_table(["statistic", "value", "unit"], rows)
+        return html_block("Co-simulation", table, lines=[
+            setting, f"{'success' if self.success else 'FAILED'}: {self.message}"])
+
     def to_csv(self, path: str | Path, every: int = 1) -> Path:
         """Write the time series (CSV, units in the header) and ``<path>.json`` metadata."""
         return self.to_response(every).to_csv(path)
@@ -240,6 +256,10 @@ def cosimulate(line: Any, pantograph: PantographSetup | str, *, speed_kmh: float
     say = progress or (lambda text: None)
     setup = pantograph_setup(pantograph) if isinstance(pantograph, str) else pantograph
     started = clock.perf_counter()
+    if isinstance(line, (str, Path)):  # a bad speed is refused before the catenary is built
+        from .lines import load_line
+
+        _checked_speed(speed_kmh, load_line(line))
     catenary = _catenary(line, options.time_step, options.element_length, options.damping, say)
     definition = catenary.line
     speed = _checked_speed(speed_kmh, definition)

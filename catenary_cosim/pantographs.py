@@ -165,10 +165,44 @@ class PantographSetup:
         """The same setup on a given FMU file."""
         return dataclasses.replace(self, fmu_path=str(path))
 
-    def with_parameters(self, **values: Any) -> "PantographSetup":
-        """The same setup with some parameters changed or added."""
-        return dataclasses.replace(self, parameters=tuple({**dict(self.parameters),
+    def with_parameters(self, source: Any = None, /, **values: Any) -> "PantographSetup":
+        """The same setup with some parameters changed or added.
+
+        Parameters
+        ----------
+        source : mapping, parameter file or identification result, optional
+            Values read against this setup's FMU by
+            :func:`panto.build_fmu.parameter_sources.fmu_parameter_values` (a parameter file:
+            units converted, model checked; a result: its values of the FMU's parameters). What
+            the setup itself sets for the line (unilateral contact, the relaxed height, the
+            speed's uplift force) is not taken from a file or a result, which hold the model's
+            defaults for them.
+        **values
+            Parameter name -> value; these win over `source` and the setup's own values.
+
+        Returns
+        -------
+        PantographSetup
+        """
+        given = {} if source is None else self._values_from(source)
+        return dataclasses.replace(self, parameters=tuple({**dict(self.parameters), **given,
                                                            **values}.items()))
+
+    def _values_from(self, source: Any) -> dict[str, Any]:
+        """Parameter values of `source` (see :meth:`with_parameters`) for this setup's FMU."""
+        if isinstance(source, Mapping):
+            return dict(source)
+        from fmpy import read_model_description
+
+        from panto.build_fmu.parameter_sources import fmu_parameter_values
+
+        description = read_model_description(str(self.resolve_fmu()), validate=False)
+        parameters = [v for v in description.modelVariables if v.causality == "parameter"]
+        values = fmu_parameter_values(source, model=description.modelName,
+                                      parameter_names=[v.name for v in parameters],
+                                      units={v.name: v.unit or "" for v in parameters})
+        own = {self.unilateral_parameter, self.relaxed_height_parameter, self.uplift_parameter}
+        return {name: value for name, value in values.items() if name not in own}
 
     def resolve_fmu(self, cache_dir: str | Path | None = None,
                     progress: Callable[[str], None] | None = None) -> Path:

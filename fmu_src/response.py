@@ -166,10 +166,33 @@ class TimeResponse:
         signals = ", ".join(format_header(name, unit) for name, unit in self.units.items())
         return f"TimeResponse({len(self)} samples, {span}; {signals})"
 
+    def _repr_html_(self) -> str:
+        """A notebook's view: the time span, then one row per signal (unit, range, NaNs)."""
+        from panto.fmu_src.display import html_block, html_table
+
+        rows = []
+        for name, values in self.signals.items():
+            finite = values[np.isfinite(values)]
+            low, high = (finite.min(), finite.max()) if finite.size else (None, None)
+            rows.append([name, self.units[name] or "?", low, high,
+                         int(values.size - finite.size)])
+        span = (f"{len(self)} samples, t = {self.time[0]:g} to {self.time[-1]:g} s"
+                if self.time.size else "no samples")
+        source = ", ".join(str(self.metadata[key]) for key in ("model", "interface", "source")
+                           if self.metadata.get(key))
+        table = html_table(["signal", "unit", "minimum", "maximum", "missing samples"], rows)
+        return html_block("TimeResponse", table, lines=[span, source])
+
     # --- tables and files -------------------------------------------------------------------
 
-    def to_pandas(self) -> pandas.DataFrame:
+    def to_pandas(self, *, units_in_names: bool = False) -> pandas.DataFrame:
         """The signals as a DataFrame indexed by time.
+
+        Parameters
+        ----------
+        units_in_names : bool, optional
+            Name the columns ``name [unit]`` (and the index ``time [s]``) as the CSV header
+            does, e.g. for a table a person reads; default ``False``: the plain signal names.
 
         Returns
         -------
@@ -184,12 +207,22 @@ class TimeResponse:
         >>> df = TimeResponse([0.0, 1.0], {"F_c": [90.0, 110.0]}, units={"F_c": "N"}).to_pandas()
         >>> df.attrs["units"]["F_c"]
         'N'
+        >>> df = TimeResponse([0.0, 1.0], {"F_c": [90.0, 110.0]}, units={"F_c": "N"}).to_pandas(
+        ...     units_in_names=True)
+        >>> df.index.name, df.columns.tolist()
+        ('time [s]', ['F_c [N]'])
         """
         import pandas as pd
 
-        frame = pd.DataFrame({name: np.array(values) for name, values in self.signals.items()},
-                             index=pd.Index(np.array(self.time), name=TIME_NAME))
-        frame.attrs["units"] = {TIME_NAME: TIME_UNIT, **self.units}
+        def column(name: str) -> str:
+            return format_header(name, self.units.get(name, TIME_UNIT)) if units_in_names \
+                else name
+
+        frame = pd.DataFrame({column(name): np.array(values)
+                              for name, values in self.signals.items()},
+                             index=pd.Index(np.array(self.time), name=column(TIME_NAME)))
+        frame.attrs["units"] = {column(TIME_NAME): TIME_UNIT,
+                                **{column(name): unit for name, unit in self.units.items()}}
         frame.attrs["metadata"] = dict(self.metadata)
         return frame
 
@@ -343,9 +376,10 @@ class TimeResponse:
         """Plot signals against time, one subplot per signal, units on the axes.
 
         The figure is a bare :class:`matplotlib.figure.Figure` (no pyplot, no GUI, no global
-        figure registry), so it is safe in scripts, tests, servers and loops; save it with
-        ``fig.savefig(...)`` or :meth:`save_plot`. Jupyter displays it when it is the last
-        expression of a cell.
+        figure registry, no backend chosen), so it is safe in scripts, tests, servers and loops;
+        save it with ``fig.savefig(...)`` or :meth:`save_plot`. Jupyter and IPython display it
+        as a picture when it is the last expression of a cell
+        (:class:`panto.fmu_src.figures.NotebookFigure`).
 
         Parameters
         ----------
@@ -404,9 +438,9 @@ class TimeResponse:
     def _axes_for(self, names: list[str], ax: Any) -> tuple[list[Any], bool]:
         """Axes to draw `names` on, and whether they all share one Axes."""
         if ax is None:
-            from matplotlib.figure import Figure
+            from panto.fmu_src.figures import NotebookFigure
 
-            figure = Figure(figsize=(8.0, 1.0 + 1.8 * len(names)), layout="constrained")
+            figure = NotebookFigure(figsize=(8.0, 1.0 + 1.8 * len(names)), layout="constrained")
             axes = figure.subplots(len(names), 1, sharex=True, squeeze=False)[:, 0]
             title = self.metadata.get("model")
             if title:

@@ -233,6 +233,11 @@ class Dataset:
         return TimeResponse(self.time, dict(self.channels), units=dict(self.units),
                             metadata=self.metadata.to_dict())
 
+    def to_response(self):
+        """As a :class:`panto.fmu_src.response.TimeResponse`: :meth:`to_time_response` under the
+        name every time series of the project shares (``.to_response().plot()``)."""
+        return self.to_time_response()
+
     def write(self, path: str | Path) -> Path:
         """Write as ``.csv`` (+ ``.csv.json``), ``.parquet`` or ``.mat``, by the suffix."""
         path = Path(path)
@@ -301,6 +306,58 @@ def check_dataset(time: Any, channels: Mapping[str, Any], units: Mapping[str, st
     return time, checked, checked_units
 
 
+#: Largest magnitude a measured value may have, in any unit of :data:`UNIT_FACTORS`: no signal
+#: of the rig comes near 1e12 N, m, bar, A or V; a value beyond it is a corrupt cell (and its
+#: square, near 1e154, overflows the least-squares sums). The storage keeps any double; the
+#: users of the data (``rig check``, identification) refuse such values (:func:`check_plausible`).
+PLAUSIBLE_MAGNITUDE = 1e12
+
+
+def check_plausible(dataset: "Dataset", source: str, names: Sequence[str] | None = None) -> None:
+    """Refuse a channel value beyond :data:`PLAUSIBLE_MAGNITUDE` in magnitude.
+
+    Parameters
+    ----------
+    dataset : Dataset
+        The data.
+    source : str
+        The file named in the message (with the channel, its unit, the value and its row).
+    names : sequence of str, optional
+        The channels to check (default: all).
+
+    Raises
+    ------
+    DatasetError
+        On the first channel with such a value.
+    """
+    for name in dataset.names if names is None else names:
+        array = np.asarray(dataset[name])
+        with np.errstate(invalid="ignore"):
+            bad = np.flatnonzero(np.abs(array) > PLAUSIBLE_MAGNITUDE)
+        if bad.size:
+            raise DatasetError(
+                f"{source}: channel {name!r} [{dataset.units.get(name, '')}]: "
+                f"{array[bad[0]]:.6g} at row {int(bad[0])} is not a plausible measurement "
+                f"(plausible range -{PLAUSIBLE_MAGNITUDE:g} to {PLAUSIBLE_MAGNITUDE:g}; "
+                f"{bad.size} value(s) outside)")
+
+
+def _check_rate(time: np.ndarray, meta: "RunMetadata", source: str) -> None:
+    """The side file's sample period must be a typical step of the time column: inside the
+    middle half of its steps (the quartiles), or within 1 % of the median step."""
+    if time.size < 2:
+        return
+    steps = np.diff(time)
+    step = float(np.median(steps))
+    low, high = np.quantile(steps, [0.25, 0.75])
+    if not min(low, 0.99 * step) <= 1.0 / meta.sample_rate <= max(high, 1.01 * step):
+        side = (f"its side file {metadata_path_for(source).name}"
+                if Path(source).suffix.lower() == ".csv" else "its metadata")
+        raise DatasetError(f"{source}: {side} says sample_rate {meta.sample_rate:g} Hz but its "
+                           f"time column steps by {step:.6g} s ({1.0 / step:.6g} Hz); correct "
+                           "one of them")
+
+
 def _check_unit(array: np.ndarray, unit: str | None, name: str, where: str,
                 convert: bool) -> tuple[np.ndarray, str]:
     if not unit:
@@ -329,6 +386,7 @@ def _finish(time: Any, channels: Mapping[str, Any], units: Mapping[str, str],
     time, channels, units = check_dataset(time, channels, units, required=required,
                                           source=source, convert_units=convert_units)
     meta = RunMetadata.from_dict(metadata, where=f"{source}: metadata")
+    _check_rate(time, meta, source)
     warnings = list(warnings)
     if meta.status == "running":
         warnings.append(f"{source}: status 'running': the recording ended without being "

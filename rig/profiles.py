@@ -312,6 +312,17 @@ class RenderedProfile:
         """Offset plus dynamic part [m]."""
         return self.motor_offset + self.motor_dynamic
 
+    def to_response(self):
+        """As a :class:`panto.fmu_src.response.TimeResponse`: ``motor_demand`` and its two parts
+        [m], ``pressure_demand`` [bar] and ``led`` [1]."""
+        from panto.fmu_src.response import TimeResponse
+
+        return TimeResponse(self.time, {
+            "motor_demand": self.motor_demand, "motor_offset": self.motor_offset,
+            "motor_dynamic": self.motor_dynamic, "pressure_demand": self.pressure_demand,
+            "led": self.led}, units={"motor_demand": "m", "motor_offset": "m",
+                                     "motor_dynamic": "m", "pressure_demand": "bar", "led": "1"})
+
 
 def render_profile(profile: Profile) -> RenderedProfile:
     """The whole run at once (for offline use: the emulator, plots, design of experiments)."""

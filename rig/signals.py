@@ -69,6 +69,14 @@ def _require(condition: bool, field_name: str, value: Any, problem: str) -> None
         raise ValueError(f"{field_name} = {value!r}: {problem}")
 
 
+def _below_nyquist(field_name: str, frequency: float, sample_rate: float) -> None:
+    """Refuse a frequency [Hz] at or above the Nyquist frequency of `sample_rate` [Hz]: sampled,
+    it would alias to a lower one."""
+    _require(frequency < sample_rate / 2.0, field_name, frequency,
+             f"must be below the Nyquist frequency {sample_rate / 2:g} Hz of the "
+             f"{sample_rate:g} Hz sample rate (it would alias)")
+
+
 @dataclass(frozen=True, kw_only=True)
 class Signal:
     """Base of all signals: an active window ``[start, stop)`` and the registry plumbing.
@@ -234,6 +242,7 @@ class Sine(Signal):
         _require(math.isfinite(self.phase), "phase", self.phase, "must be finite")
 
     def _build(self, rng, context, window):
+        _below_nyquist("frequency", self.frequency, context.sample_rate)
         return lambda tau: self.amplitude * np.sin(2.0 * np.pi * self.frequency * tau
                                                    + self.phase)
 
@@ -289,6 +298,9 @@ class Chirp(Signal):
         return 2.0 * np.pi * f0 * length * np.expm1(log_ratio * tau / length) / log_ratio
 
     def _build(self, rng, context, window):
+        for name in ("f_start", "f_stop"):
+            _below_nyquist(name, getattr(self, name), context.sample_rate)
+
         def evaluate(tau: np.ndarray) -> np.ndarray:
             if self.repeat:
                 tau = np.mod(tau, self.duration)

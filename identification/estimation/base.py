@@ -108,6 +108,17 @@ class IdentificationData:
                                   self.input_names, self.output_names, self.units, self.source,
                                   self.metadata)
 
+    def to_response(self) -> Any:
+        """The inputs and outputs as a :class:`panto.fmu_src.response.TimeResponse` (units from
+        :attr:`units`, metadata with the :attr:`source`), e.g. ``data.to_response().plot()``."""
+        from panto.fmu_src.response import TimeResponse
+
+        names = self.input_names + self.output_names
+        signals = dict(zip(names, np.column_stack([self.inputs, self.outputs]).T))
+        return TimeResponse(self.time, signals,
+                            units={n: self.units[n] for n in names if n in self.units},
+                            metadata={**dict(self.metadata), "source": self.source})
+
     def select_outputs(self, names: Sequence[str]) -> "IdentificationData":
         """The same experiment with only the named outputs (in that order)."""
         columns = [self._index(self.output_names, n, "output") for n in names]
@@ -235,6 +246,49 @@ class IdentificationResult:
         simulated = self.simulate(data)
         measured = data.select_outputs(output_names).outputs
         return dict(zip(output_names, np.atleast_1d(fit_percent(measured, simulated)).tolist()))
+
+    def response(self, data: IdentificationData) -> Any:
+        """The identified model's free run on `data` as a :class:`panto.fmu_src.response.TimeResponse`
+        (the outputs named as in `data`, with its units), to plot over ``data.to_response()``."""
+        from panto.fmu_src.response import TimeResponse
+
+        simulated = np.asarray(self.simulate(data), float).reshape(len(data), -1)
+        names = data.output_names[:simulated.shape[1]]
+        return TimeResponse(data.time, dict(zip(names, simulated.T)),
+                            units={n: data.units[n] for n in names if n in data.units},
+                            metadata={"model": self.structure, "interface": self.method})
+
+    def _repr_html_(self) -> str:
+        """A notebook's view: fits, then the parameters with unit, standard deviation, 95 %
+        interval and the marks of the verdict (at a bound, not identifiable, fixed)."""
+        from panto.fmu_src.display import html_block, html_table
+
+        intervals = self.details.get("intervals_95", {})
+        rows = []
+        for name, value in self.parameters.items():
+            estimate = self.estimates.get(name)
+            if estimate is not None:
+                rows.append([name, estimate.value, estimate.unit, estimate.std,
+                             _interval(estimate.interval_95), estimate.status, estimate.verdict])
+            else:
+                free = name in self.free
+                rows.append([name, value, "", self.std.get(name) if free else None,
+                             _interval(intervals.get(name)) if free else None,
+                             "estimated" if free else "fixed", None])
+        fits = ", ".join(f"{o} {f:.2f} %" for o, f in self.fit.items())
+        lines = [f"{'success' if self.success else 'FAILED'}: {self.message}",
+                 f"fit on the data fitted: {fits}" if fits else "",
+                 f"{self.n_evaluations} evaluations, {self.wall_time:.3g} s"]
+        table = html_table(["parameter", "value", "unit", "std (1 σ)", "95 % interval",
+                            "status", "verdict"], rows)
+        return html_block(f"{self.structure} ({self.method})", table, lines=lines)
+
+
+def _interval(bounds: Sequence[float] | None) -> str | None:
+    """``[low, high]`` for a table cell; None when missing or not finite."""
+    if bounds is None or not all(math.isfinite(float(b)) for b in bounds):
+        return None
+    return f"[{float(bounds[0]):.4g}, {float(bounds[1]):.4g}]"
 
 
 @dataclass(frozen=True)
