@@ -9,25 +9,27 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import json
-import logging
 import os
 import sys
 import traceback
 from pathlib import Path
 from typing import Callable, Iterator
 
-from panto.console import progress, say, set_verbosity
-from panto.data_options import non_negative_float
+from panto import console
+from panto.console import progress, say
+from panto.data_options import UsageError, non_negative_float
 
 #: Exit codes of every ``panto`` command (shown by ``panto --help``).
 EXIT_CODES = {0: "success",
               1: "the command ran, and its result is negative (a fit that failed, a check "
                  "outside its limits, aliasing suspected)",
-              2: "usage error or bad input (an option, a file, a column, a value): one line "
-                 "names it",
+              2: "usage error: an unknown option, a missing argument, an option value out "
+                 "of its range (found before any work); one line names it",
               3: "internal error (a bug: run with -v for the traceback and report it)",
               4: "aborted (Ctrl-C); what was recorded so far is kept",
+              65: "bad input data (as sysexits' EX_DATAERR): a file missing, malformed or "
+                  "implausible, a column, a value, an output that cannot be written, an option "
+                  "that does not fit the data; one line names it",
               141: "standard output closed early (e.g. piped into head): ends quietly"}
 
 
@@ -69,8 +71,7 @@ def run_linearise(args: argparse.Namespace) -> int:
         say(f"{name:>6} = {value:.6g}")
     say("modes [Hz]: " + ", ".join(f"{f:.3f}" for f in lin.natural_frequencies_hz))
     if args.json:
-        Path(args.json).write_text(json.dumps(result, indent=2))
-        say(f"wrote {args.json}")
+        console.write_json(args.json, result)
     return 0
 
 
@@ -85,9 +86,12 @@ def run_parameters(args: argparse.Namespace) -> int:
 
 def run_demo(args: argparse.Namespace) -> int:
     """The main job on the embedded defaults."""
-    from panto.demo import run_demo as demo
+    from panto.demo import DemoError, run_demo as demo
 
-    demo(Path(args.out), quick=args.quick, progress=progress)
+    try:
+        demo(Path(args.out), quick=args.quick, progress=progress)
+    except DemoError as failed:  # the run ended; its result is negative (code 1)
+        return _fail("demo", str(failed), 1)
     return 0
 
 
@@ -110,12 +114,25 @@ def _epilog() -> str:
 
 
 def _add_verbosity(parser: argparse.ArgumentParser, *, top: bool) -> None:
-    """``-v``/``-q`` on `parser`; on a subcommand they default to 'not given' (the top's)."""
-    default = {} if top else {"default": argparse.SUPPRESS}
-    parser.add_argument("-v", "--verbose", action="store_true", **default,
-                        help="log details (and show the traceback of an internal error)")
-    parser.add_argument("-q", "--quiet", action="store_true", **default,
-                        help="print only results and errors, no progress lines")
+    """``-v``/``-q`` on `parser`; a subcommand's count apart from the top's (they add up)."""
+    after = "" if top else "_after"
+    parser.add_argument("-v", "--verbose", action="count", default=0, dest="verbose" + after,
+                        help="more on standard error: -v every progress line with its time, "
+                             "debug records and an internal error's traceback; -vv also "
+                             "third-party libraries' records")
+    parser.add_argument("-q", "--quiet", action="store_true", dest="quiet" + after,
+                        help="no progress on standard error, only warnings and errors; results "
+                             "still on standard output")
+
+
+def verbosity(args: argparse.Namespace) -> int:
+    """The :mod:`panto.console` level of the parsed `args` (``-q``: -1, none: 0, ``-vv``: 2).
+
+    ``-v`` and ``-q`` count before and after the subcommand alike; ``-q`` wins.
+    """
+    if args.quiet or getattr(args, "quiet_after", False):
+        return console.QUIET
+    return min(console.DEBUG, args.verbose + getattr(args, "verbose_after", 0))
 
 
 def walk_parsers(parser: argparse.ArgumentParser) -> Iterator[argparse.ArgumentParser]:
@@ -192,17 +209,22 @@ def main(argv: list[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as done:  # --help, --version, a usage error
         return done.code if isinstance(done.code, int) else 2
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
-                        format="%(levelname)s %(name)s: %(message)s")
-    set_verbosity(quiet=args.quiet)
+    level = verbosity(args)
+    console.set_verbosity(level, json_to_stdout=getattr(args, "json", None) == "-")
     try:
-        return _run(args, handlers[args.command])
+        return _run(args, handlers[args.command], traceback_wanted=level >= console.VERBOSE)
     finally:
-        set_verbosity(quiet=False)
+        console.reset()
 
 
-def _run(args: argparse.Namespace, handler: Callable[[argparse.Namespace], int]) -> int:
-    """Check the paths, run `handler`, and map how it ended to an exit code."""
+def _run(args: argparse.Namespace, handler: Callable[[argparse.Namespace], int], *,
+         traceback_wanted: bool) -> int:
+    """Check the paths, run `handler`, and map how it ended to an exit code.
+
+    A :class:`~panto.data_options.UsageError` is a usage error (2); a ``ValueError``,
+    ``OSError`` or ``RuntimeError`` (bad input refused in words by the library) is bad input
+    (65); any other exception, a ``KeyError`` or ``IndexError`` among them, is a bug (3).
+    """
     name = " ".join(filter(None, (args.command, getattr(args, "rig_command", None),
                                   getattr(args, "video_command", None))))
     try:
@@ -213,29 +235,42 @@ def _run(args: argparse.Namespace, handler: Callable[[argparse.Namespace], int])
     except BrokenPipeError:  # the reader of standard output went away (| head): end quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 141
-    except (ValueError, OSError, RuntimeError, LookupError) as error:
-        return _fail(name, str(error), 2)
+    except UsageError as error:
+        return _fail(name, f"{error} (see panto {name} --help)", 2)
+    except _BUG_CLASSES as error:
+        return _internal(name, error, traceback_wanted)
+    except (ValueError, OSError, RuntimeError) as error:
+        return _fail(name, str(error), 65)
     except KeyboardInterrupt:
         return _fail(name, "aborted (Ctrl-C); what was written so far is kept", 4, "")
     except SystemExit as done:
         if isinstance(done.code, str):  # a command refusing its input in words
-            _fail(name, done.code, 2)
+            _fail(name, done.code, 65)
             raise _Refused(done.code) from None
         raise
     except Exception as error:  # a bug: one line; the traceback with -v
-        if args.verbose:
-            traceback.print_exc()
-        return _fail(name, f"internal error: {type(error).__name__}: {error} (run with -v for "
-                           "the traceback)", 3)
+        return _internal(name, error, traceback_wanted)
+
+
+#: Subclasses of the bad-input classes that are bugs, not refusals.
+_BUG_CLASSES = (NotImplementedError, RecursionError, UnicodeEncodeError)
+
+
+def _internal(name: str, error: BaseException, traceback_wanted: bool) -> int:
+    """Report a bug in one line (its traceback first under ``-v``): exit code 3."""
+    if traceback_wanted:
+        traceback.print_exception(error, file=sys.stderr)
+    return _fail(name, f"internal error: {type(error).__name__}: {error} (run with -v for "
+                       "the traceback)", 3)
 
 
 class _Refused(SystemExit):
-    """A command's refusal (:class:`SystemExit` with a message) once reported: exit code 2."""
+    """A command's refusal (:class:`SystemExit` with a message) once reported: exit code 65."""
 
     @property
     def code(self) -> int:
-        """Exit code 2 (bad input); the message is in ``args``."""
-        return 2
+        """Exit code 65 (bad input); the message is in ``args``."""
+        return 65
 
 
 def _fail(name: str, message: str, code: int, label: str = "error: ") -> int:

@@ -18,7 +18,7 @@ from contextlib import nullcontext
 from pathlib import Path
 from typing import Callable
 
-from panto.console import progress, say
+from panto.console import progress, say, write_json
 from panto.data_options import (add_data_options, load_data, non_negative_float, positive_float,
                                 positive_int)
 
@@ -51,8 +51,7 @@ def run_compare(args: argparse.Namespace) -> int:
         _save_parameters(table, folder)
         say(f"wrote {folder}/comparison.(md|csv|json|png) and {len(plots)} validation plots")
     if args.json:
-        table.write_json(args.json)
-        say(f"wrote {args.json}")
+        write_json(args.json, table.to_dict())
     return 0 if any(row.result is not None for row in table.rows) else 1
 
 
@@ -92,8 +91,7 @@ def run_sensitivity(args: argparse.Namespace) -> int:
         plot_eigenvalue_sensitivity(result, args.out)
         say(f"wrote {args.out}")
     if args.json:
-        result.write_json(args.json)
-        say(f"wrote {args.json}")
+        write_json(args.json, result.to_dict())
     return 0
 
 

@@ -13,11 +13,10 @@ One subcommand with four jobs:
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 from typing import Callable
 
-from panto.console import progress, say
+from panto.console import progress, say, write_json
 from panto.data_options import non_negative_float, positive_float, positive_int
 
 
@@ -25,11 +24,26 @@ def _setup(args: argparse.Namespace):
     from panto.catenary_cosim.pantographs import pantograph_setup, user_pantograph
 
     if args.fmu and not args.pantograph:
+        _check_variables(args)
         return user_pantograph(args.fmu, height_input=args.height_input,
                                force_output=args.force_output, head_output=args.head_output,
                                height_offset=args.height_offset)
     setup = pantograph_setup(args.pantograph or "en50318-2002", pressure_bar=args.pressure)
     return setup.with_fmu(args.fmu) if args.fmu else setup
+
+
+def _check_variables(args: argparse.Namespace) -> None:
+    """Before any work: a user FMU has the input and outputs named by the options."""
+    from fmpy import read_model_description
+
+    from panto.build_fmu.simulate import check_names
+
+    description = read_model_description(args.fmu)
+    names = {role: [v.name for v in description.modelVariables if v.causality == role]
+             for role in ("input", "output")}
+    check_names([args.height_input], names["input"], "input", description.modelName)
+    check_names([n for n in (args.force_output, args.head_output) if n], names["output"],
+                "output", description.modelName)
 
 
 def _print_statistics(statistics: dict[str, float]) -> None:
@@ -99,9 +113,7 @@ def _run(args: argparse.Namespace) -> int:
         document = {**statistics, "settings": result.settings, "counters": result.counters,
                     "timing": result.timing, "statistics_details": result.statistics().details(),
                     "message": result.message}
-        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.json).write_text(json.dumps(document, indent=2, default=str) + "\n")
-        say(f"wrote {args.json}")
+        write_json(args.json, document, default=str)
     return 0
 
 

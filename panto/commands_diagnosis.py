@@ -19,13 +19,12 @@ compare``); the loading is the library's
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 from typing import Any, Callable
 
-from panto.console import progress, say
-from panto.data_options import (add_data_options, load_data, non_negative_int, positive_float,
-                                positive_int)
+from panto.console import progress, say, write_json
+from panto.data_options import (UsageError, add_data_options, load_data, non_negative_int,
+                                positive_float, positive_int)
 from panto.data_options import parse_pairs as _pairs
 
 
@@ -97,9 +96,7 @@ def run_diagnose(args: argparse.Namespace) -> int:
         paths = write_report(result, args.out)
         say(f"wrote {paths['html']} and {paths['json']}")
     if args.json:
-        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.json).write_text(json.dumps(result.to_dict(), indent=2))
-        say(f"wrote {args.json}")
+        write_json(args.json, result.to_dict())
     return 0
 
 
@@ -133,6 +130,9 @@ def run_benchmark(args: argparse.Namespace) -> int:
     with ProcessPoolExecutor(max_workers=args.workers) as pool:
         result = run_diagnosis_benchmark(args.cases, args.seed, executor=pool, progress=progress,
                                          duration=args.duration, structure=args.model)
+    if args.json == "-":
+        raise UsageError("--json -: the benchmark writes its .md and .png beside the JSON; "
+                         "give a file")
     target = Path(args.json) if args.json else Path(args.out) / "diagnosis_benchmark.json"
     paths = write_benchmark(result, target)
     say(f"wrote {paths['json']}, {paths['markdown']} and {paths['png']}")

@@ -25,8 +25,8 @@ import json
 from collections.abc import Callable
 from pathlib import Path
 
-from panto.console import progress, say
-from panto.data_options import non_negative_int, positive_float, positive_int
+from panto.console import progress, say, write_json
+from panto.data_options import UsageError, non_negative_int, positive_float, positive_int
 
 
 def register(add: Callable) -> None:
@@ -154,7 +154,7 @@ def run_doe(args: argparse.Namespace) -> int:
     if args.closed_loop:
         return _closed_loop(args, out)
     if args.repeat or args.fmu or args.true_parameters:
-        raise SystemExit("panto doe: --repeat, --fmu and --true-parameters need --closed-loop")
+        raise UsageError("--repeat, --fmu and --true-parameters need --closed-loop")
     from panto.identification.design.constraints import RigInputConstraints
     from panto.identification.design.pantograph import DesignOptions
 
@@ -205,8 +205,7 @@ def _finish(args, summary: dict, paths: dict) -> int:
     for name, path in paths.items():
         say(f"wrote {name}: {path}")
     if args.json:
-        Path(args.json).write_text(json.dumps(summary, indent=2, default=float) + "\n")
-        say(f"wrote {args.json}")
+        write_json(args.json, summary, default=float)
     return 0
 
 

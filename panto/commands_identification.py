@@ -26,7 +26,7 @@ import math
 from pathlib import Path
 from typing import Callable
 
-from panto.console import progress, say
+from panto.console import progress, say, write_json
 from panto.data_options import (add_data_options, load_data, non_negative_float, non_negative_int,
                                 positive_int)
 
@@ -119,8 +119,7 @@ def run_identify(args: argparse.Namespace) -> int:
         from panto.identification.estimation.reporting import result_summary
 
         summary = result_summary(result, data=data, validation=validation)
-        Path(args.json).write_text(json.dumps(summary, indent=2, default=str) + "\n")
-        say(f"wrote {args.json}")
+        write_json(args.json, summary, default=str)
     return 0 if result.success else 1
 
 

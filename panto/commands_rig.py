@@ -16,7 +16,8 @@ from pathlib import Path
 from typing import Callable
 
 from panto.console import progress, say
-from panto.data_options import non_negative_float, non_negative_int, positive_float, positive_int
+from panto.data_options import (UsageError, non_negative_float, non_negative_int, positive_float,
+                                positive_int)
 
 
 def _imperfections(text: str):
@@ -67,7 +68,7 @@ def run_rig_run(args: argparse.Namespace) -> int:
     imperfections = _imperfections(args.imperfections)  # refused before a folder is made
     fmu = None if args.interface else _pantograph_fmu(args)
     if args.interface and not args.io:
-        raise ValueError("a real rig needs --io MODULE:FACTORY: a function returning the rig's "
+        raise UsageError("a real rig needs --io MODULE:FACTORY: a function returning the rig's "
                          "analogue I/O (an object with read_sensors(now), write_valve_voltage(v), "
                          "write_led(bit); see panto.rig.session.RigIO)")
     existed = bool(args.folder) and Path(args.folder).exists()
@@ -148,9 +149,10 @@ def run_rig_profile(args: argparse.Namespace) -> int:
 
 def run_rig_check(args: argparse.Namespace) -> int:
     """Check a dataset against the schema; print its channels and status."""
-    from panto.rig.dataset import REQUIRED_CHANNELS, read_dataset
+    from panto.rig.dataset import REQUIRED_CHANNELS, check_plausible, read_dataset
 
     data = read_dataset(args.dataset, required=() if args.any_channels else REQUIRED_CHANNELS)
+    check_plausible(data, args.dataset)
     say(f"{args.dataset}: {len(data)} samples at {data.metadata.sample_rate:g} Hz, "
         f"{data.time[-1] - data.time[0]:.3f} s, source {data.metadata.source}, "
         f"status {data.metadata.status}")

@@ -12,11 +12,9 @@
 from __future__ import annotations
 
 import argparse
-import json
-from pathlib import Path
 from typing import Callable
 
-from panto.console import progress, say
+from panto.console import progress, say, write_json
 from panto.data_options import non_negative_int, positive_float
 
 
@@ -41,8 +39,7 @@ def run_sync(args: argparse.Namespace) -> int:
     if args.json:
         summary = dict(result.dataset.metadata.extra["video_sync"])
         summary.update(merged_dataset=str(result.path), samples=len(result.dataset))
-        Path(args.json).write_text(json.dumps(summary, indent=2) + "\n")
-        say(f"wrote {args.json}")
+        write_json(args.json, summary)
     return 0
 
 
@@ -85,8 +82,7 @@ def run_aliasing_check(args: argparse.Namespace) -> int:
         say(f"  spectra agree (largest difference {worst:.2f} dB)")
     say(f"wrote {plot_aliasing_check(check, args.out)}")
     if args.json:
-        Path(args.json).write_text(json.dumps(check.summary(), indent=2) + "\n")
-        say(f"wrote {args.json}")
+        write_json(args.json, check.summary())
     return 1 if check.aliasing_suspected else 0
 
 

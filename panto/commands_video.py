@@ -8,11 +8,9 @@
 from __future__ import annotations
 
 import argparse
-import json
-from pathlib import Path
 from typing import Callable
 
-from panto.console import progress, say
+from panto.console import progress, say, write_json
 from panto.data_options import non_negative_int, positive_float
 
 
@@ -100,11 +98,10 @@ def run_video_track(args: argparse.Namespace) -> int:
         say(f"  {name:>10}: {lost} lost frames")
     say(f"wrote {args.out}")
     if args.json:
-        Path(args.json).write_text(json.dumps({
+        write_json(args.json, {
             "video": str(args.video), "frames": int(result.frame.size),
             "lost_frames": result.lost_frames, "led_quality": result.led_separation,
-            "led_threshold": result.led_threshold}, indent=2))
-        say(f"wrote {args.json}")
+            "led_threshold": result.led_threshold})
     return 0
 
 

@@ -24,6 +24,10 @@ import math
 from typing import Any, Callable
 
 
+class UsageError(ValueError):
+    """A command line whose options do not go together: ``panto`` exits with code 2 (usage)."""
+
+
 def parse_pairs(items: list[str] | None, flag: str) -> dict[str, str]:
     """``["a=x", "b=y,c=z"]`` -> ``{"a": "x", "b": "y", "c": "z"}``; a clear error names `flag`."""
     out = {}

@@ -1,7 +1,8 @@
 """Issue 21's bad-input catalogue: every command that reads user data or numeric options, fed a
-malformed file or option, exits with code 2 and one line on standard error that names the culprit
-(the file, the column or row, the option, the value or the allowed range), never a traceback; a
-refused ``rig run`` leaves no run folder behind.
+malformed file or option, exits with the code of its class (2: usage, an option's value out of
+its range found by the parser; 65: bad input data, found on reading) and one line on standard
+error that names the culprit (the file, the column or row, the option, the value or the allowed
+range), never a traceback; a refused ``rig run`` leaves no run folder behind.
 
 The commands run in-process (``panto.cli.main``), each refused before any real work.
 """
@@ -40,6 +41,12 @@ def _plain_tables(folder: Path) -> None:
         spoiled.loc[5, column] = value
         spoiled.to_csv(folder / f"{name}.csv", index=False)
     good.to_parquet(folder / "parquet.csv")  # a Parquet file under a .csv name
+    spoiled = good.copy()
+    spoiled.loc[5, "force"] = 1e300
+    spoiled.to_csv(folder / "huge.csv", index=False)
+    spoiled = good.copy()  # a force held constant, varying only by rounding
+    spoiled["force"] = 100.0 + 1e-12 * np.sin(3 * t)
+    spoiled.to_csv(folder / "constant.csv", index=False)
 
 
 def _rig_datasets(folder: Path) -> None:
@@ -52,9 +59,25 @@ def _rig_datasets(folder: Path) -> None:
     text, backwards = list(lines), list(lines)
     text[6] = text[6].replace(text[6].split(",")[1], "abc")
     backwards[6] = backwards[4]
-    for name, body in (("r_header", lines[:1]), ("r_text", text), ("r_backwards", backwards)):
+    huge = list(lines)
+    huge[6] = huge[6].replace(huge[6].split(",")[1], "1e300")
+    for name, body in (("r_header", lines[:1]), ("r_text", text), ("r_backwards", backwards),
+                       ("r_huge", huge), ("r_rate", lines)):
         (folder / f"{name}.csv").write_text("".join(body))
         shutil.copy(folder / "run.csv.json", folder / f"{name}.csv.json")
+    side = json.loads((folder / "r_rate.csv.json").read_text())  # 100 Hz over a 500 Hz time column
+    side["metadata"]["sample_rate"] = 100.0
+    (folder / "r_rate.csv.json").write_text(json.dumps(side))
+
+
+def _profiles(folder: Path) -> None:
+    """The sine profile with its sine, or a chirp, above the 250 Hz Nyquist frequency."""
+    profile = json.loads(Path(PROFILE).read_text())
+    profile["motor"]["signals"] = [{"kind": "sine", "frequency": 300.0, "amplitude": 0.01}]
+    (folder / "fast_sine.json").write_text(json.dumps(profile))
+    profile["motor"]["signals"] = [{"kind": "chirp", "f_start": 1.0, "f_stop": 260.0,
+                                    "duration": 10.0, "amplitude": 0.01}]
+    (folder / "fast_chirp.json").write_text(json.dumps(profile))
 
 
 def _parameter_files(folder: Path) -> None:
@@ -75,6 +98,7 @@ def files(tmp_path_factory) -> Path:
     _plain_tables(folder)
     _rig_datasets(folder)
     _parameter_files(folder)
+    _profiles(folder)
     (folder / "bogus.fmu").write_text("not a zip archive")
     (folder / "a_file").write_text("an output folder cannot be made under a file")
     (folder / "imperfections.json").write_text('{"bar_mass": 0.5, "gremlins": 1}')
@@ -90,6 +114,11 @@ CASES = [
     ("check-backwards-time", "rig check {f}/r_backwards.csv --any-channels", ["r_backwards.csv", "not strictly increasing", "row 5"]),
     ("check-parquet-named-csv", "rig check {f}/parquet.csv", ["parquet.csv", "Parquet"]),
     ("check-missing", "rig check {f}/nowhere", ["nowhere", "no such file or run folder"]),
+    ("check-huge-value", "rig check {f}/r_huge.csv --any-channels", ["r_huge.csv", "'force'", "1e+300", "row 5", "plausible range", "1e+12"]),
+    ("check-side-file-rate", "rig check {f}/r_rate.csv --any-channels", ["r_rate.csv", "r_rate.csv.json", "100 Hz", "500 Hz"]),
+    # rig profile
+    ("profile-sine-above-nyquist", "rig profile {f}/fast_sine.json --out {f}/preview", ["fast_sine.json", "frequency = 300", "Nyquist", "250 Hz"]),
+    ("profile-chirp-above-nyquist", "rig profile {f}/fast_chirp.json --out {f}/preview", ["fast_chirp.json", "f_stop = 260", "Nyquist", "250 Hz"]),
     # preprocess
     ("preprocess-header-only", "preprocess {f}/r_header.csv --out {f}/o.csv", ["r_header.csv", "no data rows"]),
     ("preprocess-parquet-named-csv", "preprocess {f}/parquet.csv --out {f}/o.csv", ["parquet.csv", "Parquet"]),
@@ -101,6 +130,9 @@ CASES = [
     ("identify-text-cell", "identify {f}/text.csv --model two-mass {io}", ["text.csv", "'force'", "line 7", "'abc'"]),
     ("identify-nan", "identify {f}/nan.csv --model two-mass {io}", ["nan.csv", "'force'", "nan", "row 5"]),
     ("identify-inf", "identify {f}/inf.csv --model two-mass {io}", ["inf.csv", "'force'", "inf", "row 5"]),
+    ("identify-huge-value", "identify {f}/huge.csv --model two-mass {io}", ["huge.csv", "'force'", "1e+300", "row 5", "plausible range", "1e+12"]),
+    ("identify-constant-force", "identify {f}/constant.csv --model two-mass {io}", ["constant.csv", "'F_c'", "'force'", "constant", "nothing to fit"]),
+    ("identify-dataset-side-file-rate", "identify {f}/r_rate.csv --model two-mass {io}", ["r_rate.csv", "r_rate.csv.json", "100 Hz", "500 Hz"]),
     ("identify-backwards-time", "identify {f}/backwards.csv --model two-mass {io}", ["backwards.csv", "not strictly increasing", "0.03"]),
     ("identify-repeated-time", "identify {f}/repeated.csv --model two-mass {io}", ["repeated.csv", "not strictly increasing", "0.04 s then 0.04 s"]),
     ("identify-parquet-named-csv", "identify {f}/parquet.csv --model two-mass {io}", ["parquet.csv", "Parquet"]),
@@ -117,6 +149,7 @@ CASES = [
     ("compare-text-cell", "compare {f}/text.csv {f}/good.csv {io}", ["text.csv", "'force'", "'abc'"]),
     # diagnose
     ("diagnose-nan", "diagnose --train {f}/nan.csv --validate {f}/good.csv --model two-mass {io}", ["nan.csv", "'force'"]),
+    ("diagnose-constant-force", "diagnose --train {f}/good.csv --validate {f}/constant.csv --model two-mass {io}", ["constant.csv", "'F_c'", "nothing to fit"]),
     ("diagnose-repeated-time", "diagnose --train {f}/good.csv --validate {f}/repeated.csv --model two-mass {io}", ["repeated.csv", "not strictly increasing"]),
     ("diagnose-unknown-option", "diagnose --train {f}/good.csv --validate {f}/good.csv --model two-mass {io} --option foo=bar", ["--option", "'foo'", "two-mass"]),
     ("diagnose-folds-0", "diagnose --train {f}/good.csv --validate {f}/good.csv --model two-mass {io} --folds 0", ["--folds", ">= 1"]),
@@ -150,17 +183,28 @@ CASES = [
 ]
 
 
+#: Exit codes by class (panto.cli.EXIT_CODES): usage and bad input data.
+USAGE, BAD_INPUT = 2, 65
+#: The catalogue's cases refused by the parser (a usage error); the others are bad input.
+USAGE_CASES = {"preprocess-rate-0", "preprocess-rate-negative", "identify-rate-0",
+               "identify-max-evaluations-0", "identify-multistart-negative", "compare-rate-0",
+               "diagnose-folds-0", "diagnose-sample-rate-negative", "doe-duration-0",
+               "doe-duration-negative", "doe-population-0", "linearise-negative-pressure",
+               "render-scale-0", "render-duration-0", "setup-frame-negative",
+               "cosim-time-step-0", "unknown-option"}
+
+
 def _argv(line: str, folder: Path) -> list[str]:
     return line.replace("{io}", " ".join(IO)).replace("{f}", str(folder)).split()
 
 
 @pytest.mark.parametrize("line, fragments", [c[1:] for c in CASES], ids=[c[0] for c in CASES])
-def test_bad_input_is_one_clear_line(line, fragments, files, capsys):
+def test_bad_input_is_one_clear_line(line, fragments, files, capsys, request):
     capsys.readouterr()
     code = main(_argv(line, files))
     printed = capsys.readouterr()
     lines = printed.err.strip().splitlines()
-    assert code == 2, printed.err
+    assert code == (USAGE if request.node.callspec.id in USAGE_CASES else BAD_INPUT), printed.err
     assert "Traceback" not in printed.err + printed.out
     assert len(lines) == 1, printed.err
     for fragment in fragments:
@@ -178,6 +222,10 @@ RIG_RUN_CASES = {
 }
 
 
+#: The rig run cases that are usage errors (the others are bad input).
+RIG_RUN_USAGE = {"duration-negative", "duration-0", "real-rig-without-io"}
+
+
 @pytest.mark.parametrize("case", RIG_RUN_CASES)
 def test_a_refused_rig_run_leaves_no_run_folder(case, files, tmp_path, capsys):
     options, fragments = RIG_RUN_CASES[case]
@@ -185,7 +233,8 @@ def test_a_refused_rig_run_leaves_no_run_folder(case, files, tmp_path, capsys):
     runs = tmp_path / "runs"
     code = main(["rig", "run", PROFILE, "--out", str(runs), *options])
     error = capsys.readouterr().err.strip()
-    assert code == 2 and "Traceback" not in error and len(error.splitlines()) == 1, error
+    expected = USAGE if case in RIG_RUN_USAGE else BAD_INPUT
+    assert code == expected and "Traceback" not in error and len(error.splitlines()) == 1, error
     assert all(fragment in error for fragment in fragments), error
     assert not runs.exists() or not any(runs.iterdir())
 

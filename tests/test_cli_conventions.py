@@ -60,12 +60,12 @@ def test_quiet_after_the_subcommand_silences_progress_not_results(flags, monkeyp
 
     _fake_command(monkeypatch, body)
     assert main(["parameters", "--out", "x.json"]) == 0
-    assert "step 1 of 3" in capsys.readouterr().out
+    assert "step 1 of 3" in capsys.readouterr().err
     assert main(["parameters", "--out", "x.json", *flags]) == 0
-    printed = capsys.readouterr().out
-    assert "result 42" in printed and "step 1 of 3" not in printed
+    printed = capsys.readouterr()
+    assert "result 42" in printed.out and "step 1 of 3" not in printed.err
     assert main(["-q", "parameters", "--out", "x.json", "-v"]) == 0  # both places at once
-    assert "step 1 of 3" not in capsys.readouterr().out
+    assert "step 1 of 3" not in capsys.readouterr().err
 
 
 def test_an_internal_error_is_one_line_with_code_3_and_the_traceback_on_request(monkeypatch,
@@ -125,3 +125,112 @@ def test_rig_limits_are_printed_with_units_and_no_python_reprs():
     assert "np." not in text and "float64" not in text and "(" in text
     for piece in ("m/s", "bar", "minimum contact force 20 N", "sample period"):
         assert piece in text, piece
+
+
+def _chatty(args):
+    """A command that reports progress, a library's debug record, a third party's, a result."""
+    import logging
+
+    from panto.console import progress, say
+
+    progress("step 1 of 3")
+    progress("diagnose: WARNING: nothing withheld")
+    logging.getLogger("panto.rig.session").debug("detail record")
+    logging.getLogger("somelibrary").debug("library noise")
+    say("result 42")
+    return 0
+
+
+def test_results_on_stdout_progress_on_stderr_and_v_deepens(monkeypatch, capsys):
+    import re
+
+    _fake_command(monkeypatch, _chatty)
+    assert main(["parameters", "--out", "x.json"]) == 0
+    printed = capsys.readouterr()
+    assert printed.out == "result 42\n"
+    assert "step 1 of 3" in printed.err and "WARNING: nothing withheld" in printed.err
+    assert "detail record" not in printed.err and "library noise" not in printed.err
+    assert main(["parameters", "--out", "x.json", "-v"]) == 0
+    printed = capsys.readouterr()
+    assert printed.out == "result 42\n" and "detail record" in printed.err
+    assert re.search(r"^\d\d:\d\d:\d\d step 1 of 3$", printed.err, re.MULTILINE)
+    assert "library noise" not in printed.err
+    for argv in (["-v", "parameters", "--out", "x.json", "-v"], ["parameters", "--out", "x.json",
+                                                                  "-vv"]):
+        assert main(argv) == 0  # -v before and after the subcommand add up to -vv
+        printed = capsys.readouterr()
+        assert printed.out == "result 42\n" and "library noise" in printed.err
+    assert main(["parameters", "--out", "x.json", "-q"]) == 0  # warnings survive --quiet
+    printed = capsys.readouterr()
+    assert "WARNING: nothing withheld" in printed.err and "step 1 of 3" not in printed.err
+
+
+def test_counted_progress_draws_a_bar_on_a_terminal_and_lines_elsewhere(monkeypatch, capsys):
+    from panto import console
+
+    def body(args):
+        for k in range(1, 21):
+            console.progress(f"tracked {k}/20 frames")
+        console.say("result")
+        return 0
+
+    _fake_command(monkeypatch, body)
+    assert main(["parameters", "--out", "x.json"]) == 0  # not a terminal: every line
+    printed = capsys.readouterr()
+    assert printed.out == "result\n"
+    assert all(f"tracked {k}/20 frames\n" in printed.err for k in range(1, 21))
+    monkeypatch.setattr(console, "_terminal", lambda: True)
+    assert main(["parameters", "--out", "x.json"]) == 0
+    printed = capsys.readouterr()
+    assert printed.out == "result\n"
+    assert "%|" in printed.err and "\r" in printed.err  # tqdm's bar, redrawn in place
+    assert "tracked 7/20 frames\n" not in printed.err  # no scrolling line per step
+    assert printed.err.rstrip().endswith("tracked 20/20 frames")  # the last line stays
+    assert main(["parameters", "--out", "x.json", "-v"]) == 0  # -v: lines, no bar
+    printed = capsys.readouterr()
+    assert "%|" not in printed.err and "tracked 7/20 frames\n" in printed.err
+
+
+def test_json_dash_writes_the_document_alone_to_stdout(tmp_path, capsys):
+    import json
+
+    assert main(["linearise", "--json", "-"]) == 0
+    printed = capsys.readouterr()
+    document = json.loads(printed.out)  # nothing but the JSON document
+    assert "modes [Hz]" in printed.err and "modes" not in printed.out
+    assert main(["linearise", "--json", str(tmp_path / "l.json")]) == 0
+    assert json.loads((tmp_path / "l.json").read_text()) == document
+    assert f"wrote {tmp_path / 'l.json'}" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("error, code, fragment", [
+    (ValueError("data.csv: column 'force': row 3 is not a number"), 65, "row 3"),
+    (FileNotFoundError("data.csv: no such file"), 65, "no such file"),
+    (KeyError("F_c"), 3, "internal error: KeyError"),
+    (IndexError("index 7 is out of bounds"), 3, "internal error: IndexError"),
+    (NotImplementedError("later"), 3, "internal error: NotImplementedError"),
+], ids=["value", "missing-file", "key-bug", "index-bug", "not-implemented"])
+def test_exit_codes_by_class(error, code, fragment, monkeypatch, capsys):
+    def body(args):
+        raise error
+
+    _fake_command(monkeypatch, body)
+    assert main(["parameters", "--out", "x.json"]) == code
+    printed = capsys.readouterr().err.strip()
+    assert len(printed.splitlines()) == 1 and fragment in printed
+
+
+def test_a_library_key_error_is_an_internal_error_not_bad_input(monkeypatch, capsys):
+    """A dict lookup that fails deep in the library is a bug (3), whatever its message."""
+    from panto.data_options import UsageError
+
+    _fake_command(monkeypatch, lambda args: {"eta": 1.0}["p"])
+    assert main(["parameters", "--out", "x.json"]) == 3
+    assert "internal error: KeyError: 'p'" in capsys.readouterr().err
+
+    def body(args):
+        raise UsageError("--repeat needs --closed-loop")
+
+    _fake_command(monkeypatch, body)
+    assert main(["parameters", "--out", "x.json"]) == 2
+    assert "--repeat needs --closed-loop (see panto parameters --help)" in capsys.readouterr().err

@@ -133,16 +133,16 @@ def test_a_missing_column_is_one_clear_line(identified, capsys):
     code = main(["identify", str(folder / "train.csv"), "--model", "two-mass", *INPUTS,
                  "--outputs", "F_c=contact_force"])
     error = capsys.readouterr().err.strip()
-    assert code == 2 and "Traceback" not in error and len(error.splitlines()) == 1
+    assert code == 65 and "Traceback" not in error and len(error.splitlines()) == 1
     assert "train.csv" in error and "contact_force" in error
     assert "['bar', 'force', 'height', 'pressure', 'time']" in error
     code = main(["identify", str(folder / "train.csv"), "--model", "blackbox-2"])
     error = capsys.readouterr().err.strip()
-    assert code == 2 and "--inputs and --outputs" in error and "'height'" in error
+    assert code == 65 and "--inputs and --outputs" in error and "'height'" in error
     (folder / "train.h5").write_bytes(b"")
     code = main(["identify", str(folder / "train.h5"), "--model", "two-mass", *INPUTS, *OUTPUTS])
     error = capsys.readouterr().err.strip()
-    assert code == 2 and len(error.splitlines()) == 1
+    assert code == 65 and len(error.splitlines()) == 1
     assert "HDF5" in error or "train.h5" in error
 
 

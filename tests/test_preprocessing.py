@@ -161,5 +161,5 @@ def test_panto_preprocess_and_aliasing_check_commands(tmp_path, capsys):
                  "--out", str(tmp_path / "alias.png"), "--json", str(tmp_path / "a.json")]) == 1
     assert "aliasing suspected in 240-243.5 Hz" in capsys.readouterr().out
     assert (tmp_path / "alias.png").is_file() and (tmp_path / "a.json").is_file()
-    assert main(["preprocess", str(tmp_path / "b.csv"), "--out", str(tmp_path / "x.csv")]) == 2
+    assert main(["preprocess", str(tmp_path / "b.csv"), "--out", str(tmp_path / "x.csv")]) == 65
     assert "not a whole number" in capsys.readouterr().err

@@ -42,11 +42,11 @@ def test_rig_commands_refuse_bad_input_with_a_clear_message(tmp_path, capsys):
     bad = tmp_path / "bad.json"
     bad.write_text('{"duration": 1, "limits": {"motor_min": 0.1, "motor_max": -0.1, '
                    '"safe_pressure": 4}, "motor": {"offset": 0}, "pressure": {"offset": 4}}')
-    assert main(["rig", "profile", str(bad), "--out", str(tmp_path)]) == 2
+    assert main(["rig", "profile", str(bad), "--out", str(tmp_path)]) == 65
     assert "motor_max" in capsys.readouterr().err
     broken = tmp_path / "broken.csv"
     broken.write_text("time [s],force [N]\n0.0,1.0\n0.002,nan\n0.001,2.0\n")
-    assert main(["rig", "check", str(broken), "--any-channels"]) == 2
+    assert main(["rig", "check", str(broken), "--any-channels"]) == 65
     assert "broken.csv" in capsys.readouterr().err
     assert main(["rig", "run", str(PROFILES / "sine_1hz.json"), "--interface", "virtual",
                  "--channel", "x", "--folder", str(tmp_path / "r")]) == 2

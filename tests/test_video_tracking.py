@@ -265,7 +265,7 @@ def test_cli_renders_sets_up_and_tracks(tmp_path, capsys):
     assert summary["frames"] == 41 and summary["led_quality"] > 0.5
     assert (tmp_path / "steps.png").is_file()
     assert main(["video", "track", str(tmp_path / "truth.csv"), "--setup",
-                 str(tmp_path / "setup.json"), "--out", str(tmp_path / "t2.csv")]) == 2
+                 str(tmp_path / "setup.json"), "--out", str(tmp_path / "t2.csv")]) == 65
     assert "truth.csv" in capsys.readouterr().err
 
 

@@ -194,9 +194,16 @@ def load_identification_data(source: str | Path | Table,
     ------
     ValueError
         Inputs or outputs not named (and no rig mapping), a missing column, or a table without
-        a time base; the message names the file (or "table") and the columns it has.
+        a time base; the message names the file (or "table") and the columns it has. A value
+        beyond the plausible range, or a constant output (:func:`check_outputs_vary`).
     """
     options = options or LoadOptions()
+    data = _load(source, options)
+    _check_plausible_signals(data)
+    return check_outputs_vary(data, options.outputs)
+
+
+def _load(source: str | Path | Table, options: LoadOptions) -> IdentificationData:
     if not isinstance(source, (str, Path)):
         return _window(_table_data("table", read_table(source), options), options)
     from panto.identification.data.datasets import data_from_dataset, pantograph_data
@@ -218,7 +225,11 @@ def load_identification_data(source: str | Path | Table,
             raise
         dataset = None
     if dataset is not None:
+        from panto.rig.dataset import check_plausible
+
         _check_named(path, options, dataset.names)
+        used = [c for c in [*inputs.values(), *outputs.values()] if isinstance(c, str)]
+        check_plausible(dataset, path, [c for c in used if c in dataset.names])
         data = data_from_dataset(dataset, inputs=inputs, outputs=outputs, rate=options.rate,
                                  source=path)
         return _window(select_rows(data, options.rows), options)
@@ -322,18 +333,60 @@ def _why_missing(where: str, missing: list[str]) -> str:
 
 def _check_values(where: str, table: Mapping[str, np.ndarray], names: list[str],
                   time: np.ndarray | None) -> None:
-    """The columns used must be finite, the time column strictly increasing."""
+    """The columns used must be finite and plausible (as the rig's datasets), the time column
+    strictly increasing."""
+    from panto.rig.dataset import PLAUSIBLE_MAGNITUDE
+
     for name in dict.fromkeys(names):
         bad = np.flatnonzero(~np.isfinite(table[name]))
         if bad.size:
             raise ValueError(f"{where}: column {name!r}: {table[name][bad[0]]} at row {bad[0]} "
                              f"({bad.size} non-finite values); identification needs numbers")
+        bad = np.flatnonzero(np.abs(table[name]) > PLAUSIBLE_MAGNITUDE)
+        if bad.size:
+            raise ValueError(f"{where}: column {name!r}: {table[name][bad[0]]:.6g} at row "
+                             f"{bad[0]} is not a plausible measurement (plausible range "
+                             f"-{PLAUSIBLE_MAGNITUDE:g} to {PLAUSIBLE_MAGNITUDE:g}; {bad.size} "
+                             "value(s) outside)")
     if time is not None:
         steps = np.diff(time)
         bad = np.flatnonzero(~(steps > 0.0))
         if bad.size:
             raise ValueError(f"{where}: time is not strictly increasing at row {bad[0] + 1} "
                              f"({time[bad[0]]:.9g} s then {time[bad[0] + 1]:.9g} s)")
+
+
+def _check_plausible_signals(data: IdentificationData) -> None:
+    """The loaded inputs and outputs within the plausible range (whatever path loaded them)."""
+    from panto.rig.dataset import PLAUSIBLE_MAGNITUDE
+
+    for names, values in ((data.input_names, data.inputs), (data.output_names, data.outputs)):
+        for name, column in zip(names, np.asarray(values, float).T):
+            bad = np.flatnonzero(np.abs(column) > PLAUSIBLE_MAGNITUDE)
+            if bad.size:
+                raise ValueError(f"{data.source or 'table'}: signal {name!r}: {column[bad[0]]:.6g} "
+                                 f"at loaded sample {bad[0]} is not a plausible measurement "
+                                 f"(plausible range -{PLAUSIBLE_MAGNITUDE:g} to "
+                                 f"{PLAUSIBLE_MAGNITUDE:g})")
+
+
+def check_outputs_vary(data: IdentificationData, columns: Mapping[str, str] | None = None
+                       ) -> IdentificationData:
+    """`data` if every output varies; a constant output (there is nothing to fit, the fit % is
+    undefined) is refused naming the file, the output (and its `columns` entry) and the value.
+
+    Constant means a spread below 1e-9 of its magnitude, under the resolution of any converter
+    (a 24-bit one resolves 6e-8 of its range): a number only rounding made vary.
+    """
+    for name, values in zip(data.output_names, np.asarray(data.outputs, float).T):
+        finite = values[np.isfinite(values)]
+        if finite.size and np.ptp(finite) <= 1e-9 * np.max(np.abs(finite)):
+            column = (columns or {}).get(name)
+            label = f"output {name!r}" + (f" (column {column!r})" if column else "")
+            raise ValueError(f"{data.source or 'table'}: {label} is constant ({finite[0]:.6g} in "
+                             f"all {finite.size} samples): there is nothing to fit (the fit % "
+                             "is undefined)")
+    return data
 
 
 def select_rows(data: IdentificationData, rows: slice) -> IdentificationData:
