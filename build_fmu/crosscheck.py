@@ -17,9 +17,11 @@ Co-Simulation FMU is also
                                        an error, and crashes on FMI 3.0
   ========== ============ ============ ==========================================
 
-  Neither runs Model Exchange; only fmpy does. Because both can kill the process that loads
-  them, each run happens in a child Python process; the importer's messages about errors and
-  warnings are passed on to this module's logger.
+  Neither runs Model Exchange: :mod:`panto.build_fmu.crosscheck_me` does, in the FMU
+  Manipulation Toolbox's container. Because both can kill the process that loads them, each run
+  happens in a child Python process (this file alone, not the package); the importer's messages
+  about errors and warnings are passed on to this module's logger. Inputs are constant or vary
+  from one communication step to the next.
 
 * checked by the FMU Manipulation Toolbox (:func:`check_fmu_with_toolbox`): XSD schema of
   ``modelDescription.xml`` and the semantic rules the schema cannot express (causality,
@@ -39,14 +41,15 @@ import re
 import subprocess
 import sys
 import tempfile
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
 from types import ModuleType
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
-from fmpy import read_model_description
-from fmpy.model_description import ModelDescription
+
+if TYPE_CHECKING:
+    from fmpy.model_description import ModelDescription
 
 LOGGER = logging.getLogger(__name__)
 
@@ -97,6 +100,8 @@ class _Request:
     step_size: float
     start_values: dict[str, float | int | bool]
     outputs: list[str]
+    input_series: dict[str, list[float]] = dataclasses.field(default_factory=dict)
+    """Values of time-varying inputs, one per communication step (held over the step)."""
 
 
 def simulate_in_independent_importer(
@@ -105,14 +110,17 @@ def simulate_in_independent_importer(
     stop_time: float,
     step_size: float,
     outputs: Sequence[str],
-    inputs: Mapping[str, float] | None = None,
+    inputs: Mapping[str, float | Sequence[float]] | None = None,
     parameters: Mapping[str, float] | None = None,
     importer: Importer = "ecospy",
 ) -> dict[str, np.ndarray]:
     """Run an FMU's Co-Simulation interface in an importer independent of fmpy.
 
-    The FMU is simulated from 0 to `stop_time` with fixed communication steps; inputs are held
-    constant at the given values. The run happens in a child process.
+    The FMU is simulated from 0 to `stop_time` with fixed communication steps. An input given
+    as a number is held constant; one given as a sequence is sampled at the communication
+    points and held over each step (as fmpy does for an FMU that cannot interpolate inputs:
+    the value at ``t_k`` is set before the step from ``t_k``; the output recorded at ``t_k+1``
+    is read after it, before the next value is set). The run happens in a child process.
 
     Parameters
     ----------
@@ -124,8 +132,10 @@ def simulate_in_independent_importer(
         Communication step in s.
     outputs : sequence of str
         Names of the Real (FMI 2.0) / Float64 (FMI 3.0) variables to record.
-    inputs : mapping of str to float, optional
-        Constant values of input variables.
+    inputs : mapping of str to float or sequence of float, optional
+        Values of input variables: a constant, or ``stop_time / step_size + 1`` samples at the
+        communication points ``0, h, ..., stop_time`` (the first is also the start value
+        used at initialisation; the last enters no step).
     parameters : mapping of str to float, optional
         Values of parameters (Boolean and Integer parameters are converted).
     importer : {"ecospy", "libcosimpy"}
@@ -156,13 +166,17 @@ def simulate_in_independent_importer(
     if importer == "libcosimpy" and description.fmiVersion != "2.0":
         raise UnsupportedFmuError(f"libcosimpy handles FMI 1.0 and 2.0 only; '{path}' is FMI "
                                   f"{description.fmiVersion}")
+    steps = _count_steps(stop_time, step_size)
+    series = _input_series(inputs or {}, steps)
+    initial = {name: values[0] if name in series else values
+               for name, values in (inputs or {}).items()}
     start_values = {
-        **_convert_start_values(path, description, inputs or {}, ("input",)),
+        **_convert_start_values(path, description, initial, ("input",)),
         **_convert_start_values(path, description, parameters or {}, ("parameter",)),
     }
     _check_outputs(path, description, outputs)
-    request = _Request(importer, str(path.resolve()), _count_steps(stop_time, step_size), step_size,
-                       start_values, list(outputs))
+    request = _Request(importer, str(path.resolve()), steps, step_size, start_values,
+                       list(outputs), series)
     return _run_in_child_process(request)
 
 
@@ -220,6 +234,8 @@ class _ErrorCollector(logging.Handler):
 
 # ----------------------------------------------------------------------------- input checks
 def _read_co_simulation_description(path: Path) -> ModelDescription:
+    from fmpy import read_model_description
+
     if not path.is_file():
         raise FileNotFoundError(f"No FMU file at '{path}'")
     description = read_model_description(str(path), validate=False)
@@ -235,6 +251,21 @@ def _count_steps(stop_time: float, step_size: float) -> int:
     if not math.isclose(steps * step_size, stop_time, rel_tol=1e-9):
         raise ValueError(f"stop_time={stop_time} is not a multiple of step_size={step_size}")
     return steps
+
+
+def _input_series(inputs: Mapping[str, float | Sequence[float]],
+                  steps: int) -> dict[str, list[float]]:
+    """The time-varying inputs' samples at the communication points, checked."""
+    series = {}
+    for name, values in inputs.items():
+        if np.ndim(values) == 0:
+            continue
+        samples = np.asarray(values, dtype=float)
+        if samples.shape != (steps + 1,) or not np.all(np.isfinite(samples)):
+            raise ValueError(f"input {name!r}: {steps + 1} finite samples expected (one per "
+                             f"communication point), got shape {samples.shape}")
+        series[name] = samples.tolist()
+    return series
 
 
 def _convert_start_values(path: Path, description: ModelDescription, values: Mapping[str, float],
@@ -273,9 +304,8 @@ def _run_in_child_process(request: _Request) -> dict[str, np.ndarray]:
     with tempfile.TemporaryDirectory(prefix="crosscheck_") as directory:
         files = [Path(directory) / name for name in ("request.json", "result.npz", "error.json")]
         files[0].write_text(json.dumps(dataclasses.asdict(request)), encoding="utf-8")
-        code = f"from {__name__} import _serve_request; _serve_request()"
-        completed = subprocess.run([sys.executable, "-c", code, *map(str, files)],
-                                   capture_output=True, text=True, env=_child_environment())
+        completed = subprocess.run([sys.executable, "-c", _CHILD_CODE, __file__, *map(str, files)],
+                                   capture_output=True, text=True)
         log = _summarise_log(completed.stdout + completed.stderr)
         for line in log:
             if _NOTEWORTHY.search(line) or _FMU_ERROR.search(line):
@@ -312,16 +342,17 @@ def _summarise_log(text: str) -> list[str]:
     return [line if count == 1 else f"{line} (x{count})" for line, count in counts.items()]
 
 
-def _child_environment() -> dict[str, str]:
-    """This environment, with the folder holding this package first on the Python path."""
-    root = str(Path(__file__).resolve().parents[1])
-    python_path = os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")]))
-    return {**os.environ, "PYTHONPATH": python_path}
+_CHILD_CODE = ("import importlib.util, sys; "
+               "spec = importlib.util.spec_from_file_location('_crosscheck_child', sys.argv[1]); "
+               "module = sys.modules[spec.name] = importlib.util.module_from_spec(spec); "
+               "spec.loader.exec_module(module); module._serve_request()")
+"""The child's program: this file loaded alone, not the package around it (whose imports would
+cost every run about 0.4 s), then :func:`_serve_request`."""
 
 
 def _serve_request() -> None:
-    """Entry point of the child process: ``request.json result.npz error.json`` in argv."""
-    request_file, result_file, error_file = sys.argv[1:4]
+    """Entry point of the child process: ``request.json result.npz error.json`` last in argv."""
+    request_file, result_file, error_file = sys.argv[-3:]
     request = _Request(**json.loads(Path(request_file).read_text(encoding="utf-8")))
     try:
         result = _SIMULATORS[request.importer](request)
@@ -375,6 +406,8 @@ def _simulate_with_ecospy(request: _Request) -> dict[str, np.ndarray]:
             identifiers = [f"{INSTANCE_NAME}::{name}" for name in request.outputs]
             for step in range(request.steps + 1):
                 if step:
+                    for name, values in request.input_series.items():
+                        simulation.set_real(f"{INSTANCE_NAME}::{name}", values[step - 1])
                     simulation.step()
                 rows.append([simulation.get_time(), *map(simulation.get_real, identifiers)])
             simulation.terminate()
@@ -403,13 +436,32 @@ def _simulate_with_libcosimpy(request: _Request) -> dict[str, np.ndarray]:
     execution.add_observer(observer)
     for name in request.outputs:
         observer.start_time_series(index, references[name], CosimVariableType.REAL)
-    if not execution.step(request.steps):
+    if not all(_step_libcosimpy(execution, index, references, request)):
         raise ImporterRunError(f"libcosimpy failed on '{request.fmu_path}': "
                                f"{get_last_error_message()}")
     series = {name: _read_libcosimpy_samples(observer, index, references[name], request.steps)
               for name in request.outputs}
     return {"time": series[request.outputs[0]][0],
             **{name: values for name, (_, values) in series.items()}}
+
+
+def _step_libcosimpy(execution, index: int, references: dict[str, int],
+                     request: _Request) -> Iterator[bool]:
+    """Run all steps, yielding each call's success; time-varying inputs are overridden
+    before each step (libcosim sets an override on the FMU before its next doStep)."""
+    if not request.input_series:
+        yield execution.step(request.steps)
+        return
+    from libcosimpy.CosimManipulator import CosimManipulator
+
+    override = CosimManipulator.create_override()
+    execution.add_manipulator(override)
+    execution.override = override  # like the slave, it must outlive the execution
+    names = list(request.input_series)
+    for step in range(request.steps):
+        yield override.slave_real_values(index, [references[name] for name in names],
+                                         [request.input_series[name][step] for name in names])
+        yield execution.step(1)
 
 
 def _load_libcosimpy_execution(request: _Request) -> tuple[object, int, dict[str, int]]:

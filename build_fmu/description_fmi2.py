@@ -7,6 +7,11 @@ false), inputs carry their admissible range and states their nominal, and ``<Mod
 lists outputs, derivatives and initial unknowns with their exact dependencies and
 ``dependenciesKind`` (1-based indices into ``<ModelVariables>``; from the symbolic Jacobian,
 :mod:`panto.fmu_src.sparsity`). ``numberOfEventIndicators`` counts the contact event indicators.
+
+The independent variable ``time`` is not listed: FMI 2.0.4 §2.2.7 makes it implicit (name
+``time``, unit s) when no variable is ``independent``, and FMI Library (in libcosim, among others)
+wrongly demands a start value of a listed one (which the standard forbids). Its value reference
+0 stays reserved, so the indices are positions in the list, not value references + 1.
 """
 from __future__ import annotations
 
@@ -47,7 +52,18 @@ def _add_interfaces(root: ElementTree.Element, spec: ModelSpec,
                 ElementTree.SubElement(files, "File", name=name)
 
 
-def _type_element(variable: FmuVariable) -> tuple[str, dict[str, str]]:
+def _listed(variables: tuple[FmuVariable, ...]) -> tuple[FmuVariable, ...]:
+    """The variables of ``<ModelVariables>``: all but the implicit independent ``time``."""
+    return tuple(variable for variable in variables if variable.kind != "time")
+
+
+def _indices(variables: tuple[FmuVariable, ...]) -> dict[int, int]:
+    """The 1-based ``<ModelVariables>`` index of each listed variable, by value reference."""
+    return {variable.value_reference: position + 1
+            for position, variable in enumerate(_listed(variables))}
+
+
+def _type_element(variable: FmuVariable, indices: dict[int, int]) -> tuple[str, dict[str, str]]:
     if variable.type == "Boolean":
         attributes = {}
         if variable.start is not None:
@@ -60,28 +76,30 @@ def _type_element(variable: FmuVariable) -> tuple[str, dict[str, str]]:
     if variable.nominal is not None:
         attributes["nominal"] = format_real(variable.nominal)
     if variable.derivative_of is not None:
-        attributes["derivative"] = str(variable.derivative_of + 1)
+        attributes["derivative"] = str(indices[variable.derivative_of])
     return "Real", attributes
 
 
 def _add_variables(root: ElementTree.Element, variables: tuple[FmuVariable, ...]) -> None:
     element = ElementTree.SubElement(root, "ModelVariables")
-    for variable in variables:
+    indices = _indices(variables)
+    for variable in _listed(variables):
         attributes = {"name": variable.name, "valueReference": str(variable.value_reference),
                       "description": variable.description, "causality": variable.causality,
                       "variability": variable.variability}
         if variable.initial is not None:
             attributes["initial"] = variable.initial
         scalar = ElementTree.SubElement(element, "ScalarVariable", attributes)
-        tag, type_attributes = _type_element(variable)
+        tag, type_attributes = _type_element(variable, indices)
         ElementTree.SubElement(scalar, tag, type_attributes)
 
 
-def _unknown(parent: ElementTree.Element, variable: FmuVariable,
+def _unknown(parent: ElementTree.Element, variable: FmuVariable, indices: dict[int, int],
              dependencies: tuple[tuple[FmuVariable, str], ...] | None) -> None:
-    attributes = {"index": str(variable.value_reference + 1)}
+    attributes = {"index": str(indices[variable.value_reference])}
     if dependencies is not None:
-        attributes["dependencies"] = " ".join(str(v.value_reference + 1) for v, _ in dependencies)
+        attributes["dependencies"] = " ".join(str(indices[v.value_reference])
+                                              for v, _ in dependencies)
         attributes["dependenciesKind"] = " ".join(kind for _, kind in dependencies)
     ElementTree.SubElement(parent, "Unknown", attributes)
 
@@ -89,20 +107,21 @@ def _unknown(parent: ElementTree.Element, variable: FmuVariable,
 def _add_model_structure(root: ElementTree.Element, spec: ModelSpec,
                          variables: tuple[FmuVariable, ...]) -> None:
     structure = ElementTree.SubElement(root, "ModelStructure")
+    indices = _indices(variables)
     outputs = ElementTree.SubElement(structure, "Outputs")
     for variable in variables:
         if variable.kind == "output":
-            _unknown(outputs, variable,
+            _unknown(outputs, variable, indices,
                      list_dependencies(variable, variables, spec.dependencies))
     derivatives = ElementTree.SubElement(structure, "Derivatives")
     for variable in variables:
         if variable.kind == "derivative":
-            _unknown(derivatives, variable,
+            _unknown(derivatives, variable, indices,
                      list_dependencies(variable, variables, spec.dependencies))
     initial = ElementTree.SubElement(structure, "InitialUnknowns")
     for variable in variables:  # ascending index, as FMI 2.0 requires
         if variable.kind in ("state", "derivative", "output"):
-            _unknown(initial, variable, None)  # no attribute: depends on all knowns
+            _unknown(initial, variable, indices, None)  # no attribute: depends on all knowns
 
 
 def write_model_description_fmi2(spec: ModelSpec, variables: tuple[FmuVariable, ...],

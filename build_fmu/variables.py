@@ -35,6 +35,7 @@ LOG_CATEGORIES: tuple[tuple[str, str], ...] = (
     ("logEvents", "Mode changes"),
     ("logNonlinearSystems", "Newton iterations of the static equilibrium"),
     ("logSolver", "Co-simulation integrator: sub-steps and step sizes"),
+    ("logStatusDiscard", "Discarded co-simulation steps (a numerical limit, the FMU can go on)"),
 )
 
 _C_IDENTIFIER = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
@@ -49,7 +50,8 @@ class FmuVariable:
     name, description : str
         As shown in the modelDescription.xml.
     value_reference : int
-        Row number in the table (FMI 2.0 index = value_reference + 1).
+        Row number in the table (FMI 2.0 index = value_reference, as the implicit ``time``
+        with value reference 0 is not listed there).
     kind : str
         ``"time"``, ``"state"``, ``"derivative"``, ``"input"``, ``"output"``, ``"parameter"``,
         ``"operating_point"``, ``"solver_tolerance"``, ``"start_in_equilibrium"`` or

@@ -42,8 +42,8 @@ def _exclusive(lock_file: Path):
 def project_fmus(tmp_path_factory):
     """The displacement-excited FMUs of ``panto build-fmu`` (FMI 2.0 and 3.0), as {file name: path}.
 
-    The force-excited ones are built by ``tests/test_force_excitation.py``, the one file that
-    uses them (they would add about half a minute to every run that needs this fixture).
+    The force-excited ones are :func:`force_fmus` (a separate fixture: they would add about
+    20 s to every run that needs only these).
 
     Built once per run: the first worker builds them and records the result; the others wait on
     the lock and read the record.
@@ -58,6 +58,26 @@ def project_fmus(tmp_path_factory):
             built = pickle.loads(record.read_bytes())
         else:
             built = build_project_fmus(folder, names=DISPLACEMENT_FMU_NAMES)
+            record.write_bytes(pickle.dumps(built))
+    return {b.path.name: b for b in built}
+
+
+@pytest.fixture(scope="session")
+def force_fmus(tmp_path_factory):
+    """The force-excited FMUs of ``panto build-fmu`` (FMI 2.0 and 3.0), as {file name: BuiltFmu}.
+
+    Built once per run like :func:`project_fmus`.
+    """
+    from panto.build_fmu.project import build_project_fmus
+    from panto.fmu_src.models import FORCE_FMU_NAMES
+
+    folder = _shared_folder(tmp_path_factory, "force_fmus")
+    record = folder / "built.pickle"
+    with _exclusive(folder / "build.lock"):
+        if record.exists():
+            built = pickle.loads(record.read_bytes())
+        else:
+            built = build_project_fmus(folder, names=FORCE_FMU_NAMES)
             record.write_bytes(pickle.dumps(built))
     return {b.path.name: b for b in built}
 

@@ -7,6 +7,7 @@ must surface as an error; the checker must accept the built FMUs and reject brok
 """
 from __future__ import annotations
 
+import logging
 import re
 import zipfile
 from collections.abc import Callable
@@ -111,6 +112,19 @@ def test_failing_step_is_an_error(toy_fmus, version, importer):
     with pytest.raises(ImporterRunError, match="left its travel"):
         simulate(toy_fmus[version], parameters={"x_max": 0.001, "start_in_equilibrium": False},
                  importer=importer)
+
+
+def test_fmi2_description_leaves_time_implicit_and_libcosimpy_loads_it_silently(toy_fmus, caplog):
+    """FMI 2.0.4 section 2.2.7: without an independent variable, ``time`` (unit s) is implicit.
+    A listed one without start value (the standard forbids one) made FMI Library in libcosim warn
+    'Start attribute is required for this causality, variability and initial combination'."""
+    with zipfile.ZipFile(toy_fmus[2]) as fmu:
+        xml = fmu.read("modelDescription.xml").decode("utf-8")
+    assert 'causality="independent"' not in xml
+    with caplog.at_level(logging.WARNING, logger="panto.build_fmu.crosscheck"):
+        result = simulate(toy_fmus[2], importer="libcosimpy")
+    assert [record.getMessage() for record in caplog.records] == []
+    assert np.all(np.isfinite(result["x"]))
 
 
 def test_libcosimpy_refuses_fmi3_before_loading_it(toy_fmus):

@@ -23,15 +23,36 @@ from fmpy import extract, read_model_description, simulate_fmu
 from fmpy.simulation import instantiate_fmu
 from scipy.integrate import solve_ivp
 
-from panto.fmu_src.models import DISPLACEMENT_FMU_NAMES, Model
+from panto.fmu_src.models import DISPLACEMENT_FMU_NAMES, FORCE_FMU_NAMES, Model
 
-FILES = [f"{name}{suffix}.fmu" for name in DISPLACEMENT_FMU_NAMES for suffix in ("", "_fmi3")]
+FILES = [f"{name}{suffix}.fmu" for name in DISPLACEMENT_FMU_NAMES + FORCE_FMU_NAMES
+         for suffix in ("", "_fmi3")]
 #: Parameters set away from zero so that no dependency vanishes by accident of the defaults.
 GENERIC_PARAMETERS = {
     "Pantograph": {"T_f": 5.0, "kappa_p": 0.3, "k_c3": 1e6, "alpha": 0.05},
     "TwoMass": {"F_f1": 3.0, "F_f2": 2.0, "p_gain": 40.0},
     "ThreeMass": {"c2": 37.0, "c3": 11.0, "F_f1": 3.0, "F_f2": 2.0, "F_f3": 1.0, "p_gain": 40.0},
+    "PantographForce": {"T_f": 5.0, "k_c3": 1e6, "alpha": 0.05},
+    "TwoMassForce": {"F_f1": 3.0, "F_f2": 2.0, "p_gain": 40.0},
+    "ThreeMassForce": {"c2": 37.0, "c3": 11.0, "F_f1": 3.0, "F_f2": 2.0, "F_f3": 1.0,
+                       "p_gain": 40.0},
 }
+#: Inputs at the first point and their shift to the second: (eta m, p bar), (M_b N m, F_c N) or
+#: (F_c N, p bar).
+INPUT_POINTS = {
+    "Pantograph": ([2.0, 4.0], [-0.004, 1.5]),
+    "TwoMass": ([0.0, 3.0], [-0.004, 1.5]),
+    "ThreeMass": ([0.0, 3.0], [-0.004, 1.5]),
+    "PantographForce": ([1040.0, 80.0], [15.0, -10.0]),
+    "TwoMassForce": ([120.0, 3.0], [-10.0, 1.5]),
+    "ThreeMassForce": ([120.0, 3.0], [-10.0, 1.5]),
+}
+
+
+@pytest.fixture(scope="module")
+def project_fmus(project_fmus, force_fmus):
+    """Every FMU of ``panto build-fmu``: the session's displacement- and force-excited ones."""
+    return {**project_fmus, **force_fmus}
 
 
 class MeProbe:
@@ -106,13 +127,13 @@ def test_declared_dependencies_equal_the_jacobian_sparsity(project_fmus, tmp_pat
     path = project_fmus[file].path
     probe = MeProbe(path, extract(str(path), str(tmp_path)), GENERIC_PARAMETERS[name])
     x0 = probe.states()
-    u0 = np.array([2.0, 4.0]) if name == "Pantograph" else np.array([0.0, 3.0])
+    u0, shift = (np.array(values) for values in INPUT_POINTS[name])
     rng = np.random.default_rng(7)
     scale = np.concatenate([np.full(probe.nx // 2, 1e-3), np.full(probe.nx // 2, 0.05)])
     first = x0 + scale * rng.uniform(0.5, 1.0, probe.nx)
     second = x0 + scale * rng.uniform(-2.0, -1.0, probe.nx)
     jacobian = probe.difference_quotients(first, u0)
-    other = probe.difference_quotients(second, u0 + np.array([-0.004, 1.5]))
+    other = probe.difference_quotients(second, u0 + shift)
     declared, kinds = probe.declared()
     assert declared.shape == jacobian.shape
     np.testing.assert_array_equal(jacobian != 0.0, declared)

@@ -23,19 +23,11 @@ from fmpy import read_model_description
 from scipy import linalg
 
 from panto.build_fmu.crosscheck import check_fmu_with_toolbox
-from panto.build_fmu.project import build_project_fmus
 from panto.build_fmu.simulate import FmuSimulator
 from panto.fmu_src.models import FORCE_FMU_NAMES, Model
 from panto.fmu_src.simulation import simulate_model
 
 FILES = [f"{name}{suffix}.fmu" for name in FORCE_FMU_NAMES for suffix in ("", "_fmi3")]
-
-
-@pytest.fixture(scope="module")
-def force_fmus(tmp_path_factory):
-    """The force-excited FMUs (FMI 2.0 and 3.0) as {file name: BuiltFmu}."""
-    built = build_project_fmus(tmp_path_factory.mktemp("force_fmus"), names=FORCE_FMU_NAMES)
-    return {b.path.name: b for b in built}
 
 
 @pytest.fixture(scope="module")

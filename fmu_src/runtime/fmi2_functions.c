@@ -467,6 +467,7 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
     if (core_check_step(s, "fmi2DoStep", t, h) != CORE_OK) return fmi2Error;
     s->time = t;
     s->last_step_status = core_do_step(s, t, h);
+    if (s->last_step_status == CORE_DISCARD) return fmi2Discard; /* the instance stays usable */
     if (s->last_step_status != CORE_OK) return (fmi2Status)core_fail(s);
     return fmi2OK;
 }

@@ -398,6 +398,7 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
     if (terminateSimulation != NULL) *terminateSimulation = false;
     if (earlyReturn != NULL) *earlyReturn = false;
     if (lastSuccessfulTime != NULL) *lastSuccessfulTime = s->last_successful_time;
+    if (s->last_step_status == CORE_DISCARD) return fmi3Discard; /* the instance stays usable */
     if (s->last_step_status != CORE_OK) return (fmi3Status)core_fail(s);
     return fmi3OK;
 }

@@ -12,7 +12,8 @@
 #include "model_config.h" /* generated: MODEL_VARIABLES, MODEL_INSTANTIATION_TOKEN, ... */
 
 static const char *const LOG_CATEGORIES[] = {
-    "logStatusError", "logStatusWarning", "logEvents", "logNonlinearSystems", "logSolver"};
+    "logStatusError", "logStatusWarning", "logEvents", "logNonlinearSystems", "logSolver",
+    "logStatusDiscard"};
 #define NUMBER_OF_LOG_CATEGORIES ((int)(sizeof(LOG_CATEGORIES) / sizeof(LOG_CATEGORIES[0])))
 
 /* ---- variable table -------------------------------------------------------------------- */
@@ -109,7 +110,9 @@ CoreStatus core_check_tolerance(const CoreInstance *instance, const char *functi
 CoreStatus core_check_step(const CoreInstance *instance, const char *function,
                            double current_time, double step) {
     const char *problem = NULL;
-    if (!isfinite(current_time) || !isfinite(step)) problem = "not a finite number";
+    if (instance->last_step_status == CORE_DISCARD) {
+        problem = "the previous step was discarded (restore an FMU state or reset the FMU first)";
+    } else if (!isfinite(current_time) || !isfinite(step)) problem = "not a finite number";
     else if (step < 0.0) problem = "a negative step";
     else if (fabs(current_time - instance->time) > 1e-9 * fmax(1.0, fabs(current_time))) {
         problem = "not from the FMU's time";

@@ -16,6 +16,13 @@
  * h * clamp(0.9 err^(-1/4)). A sub-step on which the model fails (for instance a trial point where
  * a linkage cannot close) is rejected and retried four times shorter; the step fails when h
  * underflows.
+ *
+ * A step that meets a numerical limit (the tolerance cannot be met above the smallest sub-step
+ * the time allows, or too many sub-steps) is discarded (FMI 2.0.4 section 4.2.2, fmi2Discard: the
+ * step was completed only up to the last successful time, where the states are valid; a shorter
+ * communication step or a larger solver_tolerance may succeed after restoring an FMU state). A
+ * model that fails at a state it reached, or at every trial point down to the smallest sub-step,
+ * cannot go on: that is an error.
  */
 #include <math.h>
 #include <string.h>
@@ -142,13 +149,27 @@ static CoreStatus fail_step(CoreInstance *s, double t, const char *reason) {
     return CORE_ERROR;
 }
 
+/* The step ends early at t, where the states are valid (see the file header). */
+static CoreStatus discard_step(CoreInstance *s, double t, const char *reason) {
+    s->errors_suppressed = 0;
+    core_log(s, CORE_DISCARD, "logStatusDiscard",
+             "DoStep: integration of model %s discarded at t = %.17g (the last successful time): "
+             "%s; restore an FMU state, then retry with a shorter communication step or a larger "
+             "solver_tolerance", MODEL_IDENTIFIER, t, reason);
+    s->time = t;
+    s->last_successful_time = t;
+    s->step_size = 0.0;
+    s->cache_valid = 0;
+    return CORE_DISCARD;
+}
+
 /* Sub-steps from s->time to end (states in s->x); see the file header. */
 static CoreStatus integrate(CoreInstance *s, double end, double tolerance) {
     double t = s->time;
     double h = s->step_size > 0.0 ? s->step_size : initial_step_size(s, end - t, tolerance);
     int jacobian_current = 0;
     for (long substep = 0; t < end; substep++) {
-        if (substep >= MAX_SUBSTEPS_PER_STEP) return fail_step(s, t, "too many sub-steps");
+        if (substep >= MAX_SUBSTEPS_PER_STEP) return discard_step(s, t, "too many sub-steps");
         const int last = 1.1 * h >= end - t; /* rather one longer step than a tiny last one */
         const double h_used = last ? end - t : h;
         if (!jacobian_current) {
@@ -168,8 +189,8 @@ static CoreStatus integrate(CoreInstance *s, double end, double tolerance) {
             jacobian_current = 0;
             if (last && h_used < h && h_next < h) h_next = h; /* a clipped step proves little */
         } else if (h_next <= 1e-14 * fmax(1.0, fabs(t))) {
-            return fail_step(s, t, isfinite(error) ? "step size too small for the tolerance"
-                                                   : s->last_error);
+            if (isfinite(error)) return discard_step(s, t, "step size too small for the tolerance");
+            return fail_step(s, t, s->last_error);
         }
         h = h_next;
     }
