@@ -7,6 +7,7 @@ from scipy.integrate import solve_ivp
 from panto.fmu_src.models import Model
 from panto.identification.estimation.base import IdentificationData, IdentificationError
 from panto.identification.structures.registry import identifier
+from panto.identification.structures import friction_kernel
 from panto.identification.structures.oscillators import OscillatorStructure, coulomb_flow, identify_oscillator
 
 PERIOD = 0.02  # 50 Hz, the identification rate (thesis 4.2)
@@ -111,6 +112,95 @@ def test_coulomb_flow_is_exact():
                     rtol=1e-10, atol=1e-13)
     exact = coulomb_flow(v0, np.full(v0.shape, rate * 0.01 / v_eps), v_eps)
     np.testing.assert_allclose(exact, sol.y[:, -1], rtol=1e-6, atol=1e-10)
+
+
+def _friction_runs(masses, monkeypatch, switches=("1", "0")):
+    """Outputs of the friction structure on stick-slip inputs, once per kernel switch."""
+    t, eta, p = (v[:-2] for v in make_inputs(4, 6.0))  # without the smoothing's end effect
+    params = true_parameters(masses, True)
+    params.update({f"F_f{i + 1}": 25.0 for i in range(masses)})  # the masses stick for a while
+    structure = OscillatorStructure(masses, True, outputs=("y_cb", "xi", "F_c"))
+    data = data_for(t, eta, p, np.zeros((len(t), 3)), ("y_cb", "xi", "F_c"))
+    runs = []
+    for switch in switches:
+        monkeypatch.setenv(friction_kernel.SWITCH_VARIABLE, switch)
+        runs.append(structure.simulate(params, data))
+    return runs
+
+
+@pytest.mark.parametrize("masses", [2, 3])
+def test_compiled_friction_loop_equals_the_python_loop(masses, monkeypatch):
+    """The C kernel and the Python reference loop give the same outputs to round-off, on a
+    record where the velocities cross zero and the masses stick (v within v_eps)."""
+    if friction_kernel.load_library() is None:
+        pytest.skip("no C compiler: the compiled friction kernel is not available")
+    compiled, python = _friction_runs(masses, monkeypatch)
+    error = np.abs(compiled - python).max(axis=0) / np.ptp(python, axis=0)
+    assert np.all(error < 1e-12), error
+    # the stick phases are there: the run without friction differs by far more than round-off
+    t, eta, p = (v[:-2] for v in make_inputs(4, 6.0))
+    linear = OscillatorStructure(masses, False, outputs=("y_cb", "xi", "F_c"))
+    y_lin = linear.simulate({k: v for k, v in true_parameters(masses, False).items()},
+                            data_for(t, eta, p, np.zeros((len(t), 3)), ("y_cb", "xi", "F_c")))
+    assert np.abs(y_lin - python).max(axis=0)[2] > 0.05 * np.ptp(python[:, 2])
+
+
+def test_compiled_friction_flow_over_its_whole_range():
+    """One sub-step with Phi = I and no drive is the friction flow alone: the kernel's closed form
+    against the Python loop's (and coulomb_flow) from rest to the clip at 700 v_eps and from no
+    friction (q = 1) to a mass stopped within the sub-step (q = 0, tiny q)."""
+    if friction_kernel.load_library() is None:
+        pytest.skip("no C compiler: the compiled friction kernel is not available")
+    v_eps = 1e-3
+    speeds = v_eps * np.array([0.0, 1e-9, 1e-3, 0.3, 1.0, 5.0, 19.99, 20.01, 35.0, 300.0, 700.0,
+                               2000.0])
+    for q in (1.0, 0.999, 0.5, 1e-5, 1e-12, 1e-250, 0.0):
+        for sign in (1.0, -1.0):
+            for v in sign * speeds:
+                got = {}
+                for compiled in (True, False):
+                    states, x = np.zeros((2, 2)), np.array([0.1, v])
+                    friction_kernel.run(np.eye(2), np.zeros((1, 2)), x, 1, np.array([q]),
+                                        np.array([q * q]), v_eps, states, compiled=compiled)
+                    got[compiled] = (states[1, 1], x[1])
+                with np.errstate(divide="ignore"):  # q = 0: an infinite decay
+                    exact = coulomb_flow(np.array([v, v]), -np.log([q, q * q]), v_eps)
+                for value, reference in zip(got[True], exact):
+                    assert np.isfinite(value) and abs(value - reference) <= \
+                        1e-12 * max(abs(v), abs(reference), v_eps), (q, v, value, reference)
+                np.testing.assert_allclose(got[True], got[False], rtol=0,
+                                           atol=1e-12 * max(abs(v), v_eps))
+
+
+def test_friction_kernel_paths_and_fallback_without_compiler(tmp_path, monkeypatch):
+    """The dispatcher names the path it took; without a C compiler the kernel is not built and
+    the structure runs the Python loop (same outputs as the switched-off kernel)."""
+    n, substeps = 2, 4
+    rng = np.random.default_rng(0)
+    phi = np.eye(2 * n) + 0.01 * rng.standard_normal((2 * n, 2 * n))
+    drive = 1e-3 * rng.standard_normal((3 * substeps, 2 * n))
+    half, full = np.array([0.9, 0.8]), np.array([0.81, 0.64])
+    outs = {}
+    for compiled in (True, False):
+        if compiled and friction_kernel.load_library() is None:
+            continue
+        states, x = np.zeros((4, 2 * n)), np.full(2 * n, 1e-3)
+        path = friction_kernel.run(phi, drive, x, substeps, half, full, 1e-3, states,
+                                   compiled=compiled)
+        assert path == ("compiled" if compiled else "python")
+        outs[path] = states
+    if "compiled" in outs:
+        np.testing.assert_allclose(outs["compiled"], outs["python"], rtol=1e-13, atol=1e-18)
+    (reference,) = _friction_runs(2, monkeypatch, switches=("0",))
+    monkeypatch.setattr(friction_kernel, "_compiler", lambda: None)
+    monkeypatch.setenv(friction_kernel.CACHE_VARIABLE, str(tmp_path))
+    friction_kernel.load_library.cache_clear()
+    try:
+        assert friction_kernel.load_library() is None and not friction_kernel.available()
+        (fallback,) = _friction_runs(2, monkeypatch, switches=("1",))
+    finally:
+        friction_kernel.load_library.cache_clear()
+    np.testing.assert_array_equal(fallback, reference)
 
 
 def test_invalid_parameters_raise():
