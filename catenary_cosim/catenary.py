@@ -24,12 +24,14 @@ when the pantograph pushes the wire up; x = 0 at the first support.
 """
 from __future__ import annotations
 
+import ctypes
 import math
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 
-from panto.catenary_cosim.integration import NewmarkIntegrator, SlackDropperSolver
+from panto.catenary_cosim.integration import (NewmarkIntegrator, SlackDropperSolver,
+                                               check_status)
 from panto.catenary_cosim.lines import LineDefinition
 from panto.catenary_cosim.mesh import build_mesh
 from panto.catenary_cosim.static import StaticState, solve_static_state
@@ -85,6 +87,12 @@ class Catenary:
         alpha, beta = (line.rayleigh_alpha, line.rayleigh_beta) if damping else (0.0, 0.0)
         self._integrator = NewmarkIntegrator(mesh, self.static_state.dropper_elongations,
                                              self.time_step, alpha, beta)
+        self._state_pointer: Any = None
+        state = self._integrator.compiled_state  # the C step locates the load itself
+        if state is not None:
+            self._integrator._compiled.set_static_heights(self.static_state.contact_wire_heights)
+            self._advance_compiled = self._integrator._compiled.library.catenary_advance
+            self._state_pointer = ctypes.byref(state)
         self._static_solver: SlackDropperSolver | None = None
         self.time = 0.0
         self._steps = 0
@@ -102,9 +110,24 @@ class Catenary:
         The force is the load at the end of the step (t + time_step); it is shared between the two
         nodes of the element holding ``x`` with the linear shape functions.
         """
-        index, value = self._load(force, x)
-        self._integrator.step(index, value)
+        if self._state_pointer is not None and math.isfinite(force) and 0.0 <= x <= self.length:
+            check_status(self._advance_compiled(self._state_pointer, force, x))
+        else:
+            index, value = self._load(force, x)
+            self._integrator.step(index, value)
         self._steps += 1
+        self.time = self._steps * self.time_step
+
+    @property
+    def compiled_state(self) -> Any:
+        """The compiled step's state (`panto.catenary_cosim.kernel.CatenaryState`) for a loop
+        that steps the catenary in C (`panto.catenary_cosim.coupling_kernel`); None for the
+        NumPy step."""
+        return self._integrator.compiled_state
+
+    def count_compiled_steps(self, count: int) -> None:
+        """Advance the clock over `count` steps taken in C through :attr:`compiled_state`."""
+        self._steps += int(count)
         self.time = self._steps * self.time_step
 
     def _load(self, force: float, x: float) -> tuple[list[int], list[float]]:

@@ -20,10 +20,11 @@ that changes the contact-force statistics). Each step solves
 
 The matrix A = K + 2/dt C + 4/dt^2 M is constant: it is Cholesky-factorised once in band storage
 (LAPACK ``dpbtrf``, half-bandwidth 4). A step runs in the small compiled kernel of
-`panto.catenary_cosim.kernel` (substitution with that factor and the vector updates in two C
-loops, about four times cheaper than LAPACK's ``dpbtrs`` plus NumPy) when a C compiler is
-available, else with ``dpbtrs`` and NumPy into buffers allocated once; both give the same
-iterates to round-off (tests/test_catenary.py checks each against a dense textbook step). Slack droppers are handled exactly by an active-set iteration
+`panto.catenary_cosim.kernel` (substitution with that factor, the slack droppers' active set
+below and the vector updates in one foreign call, about ten times cheaper than LAPACK's
+``dpbtrs`` plus NumPy) when a C compiler is available, else with ``dpbtrs`` and NumPy into
+buffers allocated once; both give the same iterates to round-off (tests/test_catenary.py checks
+each against a dense textbook step and against each other with slack droppers). Slack droppers are handled exactly by an active-set iteration
 on the small set S of slack droppers, using the Woodbury identity with Z = A^{-1} B^T and
 G = B A^{-1} B^T computed once; a step in which no dropper is slack costs one banded solve. In the
 droppers' coordinates the slack condition is a linear complementarity problem with the positive
@@ -43,6 +44,9 @@ K. G. Murty, *Linear Complementarity, Linear and Nonlinear Programming*, Helderm
 """
 from __future__ import annotations
 
+import ctypes
+from dataclasses import dataclass
+
 import numpy as np
 import scipy.sparse as sparse
 from scipy.linalg import lapack
@@ -50,8 +54,8 @@ from scipy.linalg import lapack
 from panto.catenary_cosim import kernel
 from panto.catenary_cosim.mesh import HALF_BANDWIDTH, Mesh, banded_upper
 
-BLOCK_PIVOTING_ITERATIONS = 20
-MAX_ACTIVE_SET_ITERATIONS = 2000
+BLOCK_PIVOTING_ITERATIONS = kernel.BLOCK_PIVOTING_ITERATIONS
+MAX_ACTIVE_SET_ITERATIONS = kernel.MAX_ACTIVE_SET_ITERATIONS
 
 
 class BandedCholesky:
@@ -231,9 +235,12 @@ class NewmarkIntegrator:
         self._u, self._spare, self._s, self._history = (np.zeros(n) for _ in range(4))
         self._structure_u, self._structure_spare = np.zeros(n), np.zeros(n)
         self._change, self._scratch = np.zeros(n), np.zeros(n)
+        self._stretch = self.solver.elongations.copy()
         self._compiled = _CompiledStep(self) if kernel.enabled() else None
         if self._compiled is not None and self._compiled.library is None:
             self._compiled = None
+        # work, dissipated, defect: the C step's own counters, else plain attributes
+        self._counters = _Counters() if self._compiled is None else self._compiled.state
         #: "compiled" (the C kernel of `panto.catenary_cosim.kernel`) or "numpy" (LAPACK)
         self.backend = "numpy" if self._compiled is None else "compiled"
         self.reset()
@@ -245,8 +252,25 @@ class NewmarkIntegrator:
         self.work = 0.0
         self.dissipated = 0.0
         self.defect = 0.0
-        self._stretch = self.solver.elongations.copy()
+        np.copyto(self._stretch, self.solver.elongations)
         self._load: tuple[tuple[int, float], ...] = ()
+        if self._compiled is not None:
+            self._compiled.state.load_count = 0
+
+    work = property(lambda self: self._counters.work,
+                    lambda self, value: setattr(self._counters, "work", value),
+                    doc="Work done by the loads since the reset [J] (trapezoidal in time).")
+    dissipated = property(lambda self: self._counters.dissipated,
+                          lambda self, value: setattr(self._counters, "dissipated", value),
+                          doc="Energy dissipated by the Rayleigh damping since the reset [J].")
+    defect = property(lambda self: self._counters.defect,
+                      lambda self, value: setattr(self._counters, "defect", value),
+                      doc="Sum of the droppers' trapezoid defects since the reset [J].")
+
+    @property
+    def compiled_state(self) -> "kernel.CatenaryState | None":
+        """The C step's state (`panto.catenary_cosim.kernel.CatenaryState`), None for NumPy."""
+        return None if self._compiled is None else self._compiled.state
 
     @property
     def displacement(self) -> np.ndarray:
@@ -353,11 +377,22 @@ class NewmarkIntegrator:
                 "dropper_defect": float(self.defect)}
 
 
+@dataclass
+class _Counters:
+    """The energy counters of the NumPy step [J]."""
+
+    work: float = 0.0
+    dissipated: float = 0.0
+    defect: float = 0.0
+
+
 class _CompiledStep:
     """`NewmarkIntegrator.step` through the C kernel (`panto.catenary_cosim.kernel`).
 
-    Holds the kernel's arrays (unit factor, K_s rows, dropper rows) and the raw addresses of
-    the integrator's buffers, so that a step costs two foreign calls and no allocation.
+    Fills the kernel's :class:`~panto.catenary_cosim.kernel.CatenaryState` with the unit factor,
+    the K_s rows, the dropper rows, Z = A^{-1} B^T, G = B Z and the addresses of the integrator's
+    buffers, which stay in place (the C step copies u_{n+1} into u), so that a step, slack
+    droppers and energy counters included, is one foreign call without allocation.
     """
 
     def __init__(self, integrator: NewmarkIntegrator):
@@ -367,58 +402,61 @@ class _CompiledStep:
         mesh, solver = integrator.mesh, integrator.solver
         w, dinv = kernel.unit_factor(solver.factor._factor)
         index, weight = kernel.dropper_rows(mesh.dropper_matrix)
+        droppers = len(solver.elongations)
+        z = np.zeros((droppers, mesh.unknowns)) if not droppers else solver._z.T
+        g = np.zeros((droppers, droppers)) if not droppers else solver._g
         self._arrays = {"w": w, "dinv": dinv, "index": index, "weight": weight,
-                        "e0": np.ascontiguousarray(solver.elongations),
+                        "e0": np.ascontiguousarray(solver.elongations, dtype=float),
+                        "stiffness": np.ascontiguousarray(solver.stiffness, dtype=float),
+                        "z": np.ascontiguousarray(z), "g": np.ascontiguousarray(g),
+                        "static_height": np.zeros(mesh.elements + 1),
                         "rows": kernel.band_rows(banded_upper(mesh.stiffness_structure)),
                         "hu": integrator._history_u, "hs": integrator._history_s,
                         "alpha_mass": np.ascontiguousarray(integrator._alpha_mass),
-                        "load_index": np.zeros(4, dtype=np.int64), "load_value": np.zeros(4),
-                        "dissipation": np.zeros(2)}
-        self._address = {name: array.ctypes.data for name, array in self._arrays.items()}
-        self._droppers = len(solver.elongations)
-        self._stretch = [np.zeros(self._droppers), np.zeros(self._droppers)]
-        self._kb = 2.0 * integrator._c1 * integrator.beta
-        self._odd = int(np.any(self._arrays["rows"][[1, 3]]))
-        buffers = (integrator._u, integrator._spare, integrator._s, integrator._history,
-                   integrator._structure_u, integrator._structure_spare, *self._stretch)
-        self._buffer = {id(buffer): buffer.ctypes.data for buffer in buffers}
+                        "stretch_old": np.zeros(droppers),
+                        "system": np.zeros(max(1, droppers * droppers)),
+                        "coefficients": np.zeros(max(1, droppers)),
+                        "corrected": np.zeros(max(1, droppers)),
+                        "slack": np.zeros(max(1, droppers), dtype=np.int64),
+                        "members": np.zeros(max(1, droppers), dtype=np.int64)}
+        rows = self._arrays["rows"]
+        state = kernel.CatenaryState(
+            n=mesh.unknowns, droppers=droppers, elements=mesh.elements,
+            odd=int(np.any(rows[[1, 3]])), kb=2.0 * integrator._c1 * integrator.beta,
+            c1=integrator._c1, beta=integrator.beta, time_step=integrator.time_step,
+            element_length=mesh.element_length)
+        buffers = {"u": integrator._u, "fresh": integrator._spare, "s": integrator._s,
+                   "h": integrator._history, "ks": integrator._structure_u,
+                   "stretch": integrator._stretch}
+        for name, array in {**self._arrays, **buffers}.items():
+            if name in {f[0] for f in kernel.CatenaryState._fields_}:
+                assert array.flags.c_contiguous and array.dtype.itemsize == 8
+                setattr(state, name, array.ctypes.data)
+        self.state, self._buffers = state, buffers
+        self._pointer = ctypes.byref(state)
+        self._load_index, self._load_value = (ctypes.c_long * 4)(), (ctypes.c_double * 4)()
+        self._step = self.library.catenary_step
+
+    def set_static_heights(self, heights: np.ndarray) -> None:
+        """Contact-wire heights of the pre-state at the nodes [m] (for ``catenary_height``)."""
+        np.copyto(self._arrays["static_height"], heights)
 
     def step(self, integrator: NewmarkIntegrator, load: tuple[tuple[int, float], ...]) -> None:
         """One step of the integrator (see `NewmarkIntegrator.step`)."""
-        a, address, n = self._arrays, self._address, integrator.mesh.unknowns
+        n = integrator.mesh.unknowns
         if len(load) > 4:
             raise ValueError("the compiled step takes at most 4 point loads")
         for k, (i, force) in enumerate(load):
             if not 0 <= i < n:
                 raise IndexError(f"load index {i} outside 0..{n - 1}")
-            a["load_index"][k], a["load_value"][k] = i, force
-        u, new = integrator._u, integrator._spare
-        buffer = self._buffer
-        stretch = self._stretch[0]
-        slack = self.library.catenary_solve(
-            n, address["w"], address["dinv"], buffer[id(integrator._history)], len(load),
-            address["load_index"], address["load_value"], buffer[id(new)], self._droppers,
-            address["index"], address["weight"], address["e0"], buffer[id(stretch)])
-        solver = integrator.solver
-        solver.iterations = 0
-        if slack:
-            stretch = solver.correct(new, stretch)
-        self.library.catenary_update(
-            n, buffer[id(u)], buffer[id(new)], buffer[id(integrator._s)],
-            buffer[id(integrator._history)], buffer[id(integrator._structure_u)],
-            buffer[id(integrator._structure_spare)], address["rows"], address["hu"],
-            address["hs"], address["alpha_mass"], self._kb, integrator._c1, self._odd,
-            address["dissipation"])
-        mass_part, structure_part = a["dissipation"]
-        integrator.dissipated += (mass_part + integrator.beta * structure_part) \
-            / integrator.time_step
-        integrator.work += 0.5 * (sum(force * (new[i] - u[i]) for i, force in load)
-                                  + sum(force * (new[i] - u[i]) for i, force in integrator._load))
-        if solver.iterations or integrator._stretch.min(initial=0.0) < 0.0:
-            integrator.defect += integrator._trapezoid_defect(integrator._stretch, stretch)
-        if stretch is self._stretch[0]:  # keep the previous step's stretch for the next defect
-            self._stretch.reverse()
-        integrator._u, integrator._spare = new, u
-        integrator._structure_u, integrator._structure_spare = (integrator._structure_spare,
-                                                                integrator._structure_u)
-        integrator._stretch, integrator._load = stretch, load
+            self._load_index[k], self._load_value[k] = i, force
+        check_status(self._step(self._pointer, len(load), self._load_index, self._load_value))
+
+
+def check_status(status: int) -> None:
+    """Raise for a failed C step (-1: the slack set did not settle; -2: singular system)."""
+    if status == -1:
+        raise RuntimeError("the set of slack droppers did not settle within "
+                           f"{MAX_ACTIVE_SET_ITERATIONS} iterations")
+    if status:
+        raise RuntimeError(f"the slack droppers' system is singular (status {status})")

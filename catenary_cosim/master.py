@@ -31,6 +31,13 @@ Stability of the stiff contact
     :math:`|\\partial F/\\partial\\eta|`, :math:`g` is reported in the settings, and a gain
     above :data:`MAX_COUPLING_GAIN` is refused unless ``check_coupling=False``.
 
+Loop
+    For an FMI 2.0 Co-Simulation FMU on a catenary with its compiled step the loop runs in C
+    (`panto.catenary_cosim.coupling_kernel`: the FMU's ``fmi2SetReal``/``fmi2DoStep``/
+    ``fmi2GetReal`` called directly, the same operations in the same order as the Python
+    loop, which gives the same run bit for bit); otherwise, or with ``compiled_loop=False``,
+    the Python loop through fmpy. ``settings["loop"]`` says which ran.
+
 Start
     The pantograph starts at ``start_position`` (default: the first support) in static
     equilibrium with the static wire (the project's FMUs start in equilibrium with their inputs)
@@ -49,6 +56,7 @@ from typing import Any
 
 import numpy as np
 
+from .coupling_kernel import compiled_loop_available, run_loop
 from .pantographs import PantographSetup, pantograph_setup
 from .plots import plot_contact_force, plot_uplift
 from .statistics import ContactStatistics, compute_statistics, lowpass_filter, sample_rate
@@ -88,7 +96,9 @@ class CosimulationResult:
     counters : dict
         Communication steps, catenary steps, FMU calls, contact-loss samples and events.
     timing : dict
-        Wall seconds: ``setup``, ``catenary``, ``fmu``, ``python`` (rest of the loop), ``total``.
+        Wall seconds: ``setup``, ``catenary``, ``fmu``, ``python`` (rest of the loop), ``loop``,
+        ``total``; ``loop_cpu``: CPU seconds of the process over the loop; simulated seconds
+        per wall and per CPU second of the loop.
     success : bool
     message : str
     """
@@ -185,6 +195,7 @@ class CosimulationResult:
 class _Clocks:
     catenary: float = 0.0
     fmu: float = 0.0
+    cpu: float = 0.0  # CPU seconds of this process over the loop
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -211,6 +222,10 @@ class CosimOptions:
         Folder for project FMUs built on demand.
     check_coupling : bool
         Refuse a coupling gain above :data:`MAX_COUPLING_GAIN` (module notes).
+    compiled_loop : bool
+        Run the loop in C (`panto.catenary_cosim.coupling_kernel`: the same operations, the
+        FMU's FMI functions called directly) when the FMU is FMI 2.0 Co-Simulation and the
+        catenary has its compiled step; False: the Python loop through fmpy.
     """
 
     time_step: float = DEFAULT_TIME_STEP
@@ -223,6 +238,7 @@ class CosimOptions:
     interface: str = "CS"
     fmu_cache: str | Path | None = None
     check_coupling: bool = True
+    compiled_loop: bool = True
 
 
 def cosimulate(line: Any, pantograph: PantographSetup | str, *, speed_kmh: float,
@@ -277,8 +293,10 @@ def cosimulate(line: Any, pantograph: PantographSetup | str, *, speed_kmh: float
         setup_seconds = clock.perf_counter() - started
         say(f"co-simulating {definition.name} with {setup.name} at {speed_kmh:g} km/h "
             f"({(stop - start) / speed:.2f} s simulated, H = {step:g} s, gain {gain:.3f})")
+        compiled = options.compiled_loop and compiled_loop_available(catenary, stepper)
         record, clocks, loop_seconds = _run(catenary, stepper, inputs, offset, start, stop,
-                                            speed, substeps, bool(setup.head_output), say)
+                                            speed, substeps, bool(setup.head_output), say,
+                                            compiled)
     run_settings = {
         "line": definition.name, "line_source": getattr(definition, "source", ""),
         "pantograph": setup.to_dict(), "fmu": str(fmu_path), "interface": options.interface,
@@ -286,7 +304,8 @@ def cosimulate(line: Any, pantograph: PantographSetup | str, *, speed_kmh: float
         "communication_step_s": step, **_catenary_settings(catenary, line, options),
         "start_m": start, "stop_m": stop,
         "section_m": list(section), "eta_offset_m": offset, "coupling_gain": gain,
-        "coupling": "explicit Gauss-Seidel, pantograph first, wire height held over a step"}
+        "coupling": "explicit Gauss-Seidel, pantograph first, wire height held over a step",
+        "loop": "compiled" if compiled else "python"}
     return _result(record, catenary, section, run_settings, clocks, setup_seconds, loop_seconds)
 
 
@@ -398,8 +417,12 @@ def _coupling_gain(catenary: Any, stepper: Any, inputs: np.ndarray, step: float)
 
 def _run(catenary: Any, stepper: Any, inputs: np.ndarray, offset: float, start: float,
          stop: float, speed: float, substeps: int, has_head: bool,
-         say: Callable[[str], None]) -> tuple[dict[str, np.ndarray], _Clocks, float]:
-    """The loop (module notes). Returns the records, the clocks and the loop's wall time."""
+         say: Callable[[str], None],
+         compiled: bool = False) -> tuple[dict[str, np.ndarray], _Clocks, float]:
+    """The loop (module notes), in C if `compiled` (:func:`.coupling_kernel.run_loop`).
+
+    Returns the records, the clocks and the loop's wall time.
+    """
     dt = catenary.time_step
     steps = int(math.floor((stop - start) / (speed * dt * substeps) + 1e-9))
     n_supports = len(catenary.support_positions)
@@ -414,7 +437,15 @@ def _run(catenary: Any, stepper: Any, inputs: np.ndarray, offset: float, start: 
     advance, height, uplift, fmu_step = (catenary.advance, catenary.contact_wire_height,
                                          catenary.support_uplift, stepper.step)
     report = max(1, steps // 10)
-    loop_start = now()
+    loop_start, cpu_start = now(), clock.process_time()
+    if compiled:
+        clocks.fmu, clocks.catenary = run_loop(
+            catenary, stepper, inputs, rec, offset=offset, start=start, stop=stop, speed=speed,
+            substeps=substeps, has_head=has_head, report_every=report,
+            report=lambda n, x, force: say(f"  {100 * n // steps:3d} %  x = {x:7.1f} m  "
+                                           f"F = {force:6.1f} N"))
+        clocks.cpu = clock.process_time() - cpu_start
+        return rec, clocks, now() - loop_start
     for n in range(1, steps + 1):
         t0 = now()
         y = fmu_step(inputs)
@@ -433,6 +464,7 @@ def _run(catenary: Any, stepper: Any, inputs: np.ndarray, offset: float, start: 
         rec["uplift"][n] = uplift()
         if n % report == 0 or n == steps:
             say(f"  {100 * n // steps:3d} %  x = {x:7.1f} m  F = {force:6.1f} N")
+    clocks.cpu = clock.process_time() - cpu_start
     return rec, clocks, now() - loop_start
 
 
@@ -447,9 +479,11 @@ def _result(rec: dict[str, np.ndarray], catenary: Any, section: tuple[float, flo
     static = np.asarray(catenary.static_contact_wire_height(rec["position"]), dtype=float)
     timing = {"setup": setup_seconds, "catenary": clocks.catenary, "fmu": clocks.fmu,
               "python": loop_seconds - clocks.catenary - clocks.fmu, "loop": loop_seconds,
-              "total": setup_seconds + loop_seconds,
+              "total": setup_seconds + loop_seconds, "loop_cpu": clocks.cpu,
               "simulated_seconds_per_wall_second": float(time[-1] / loop_seconds)
-              if loop_seconds > 0 else math.inf}
+              if loop_seconds > 0 else math.inf,
+              "simulated_seconds_per_cpu_second": float(time[-1] / clocks.cpu)
+              if clocks.cpu > 0 else math.inf}
     counters = {"communication_steps": steps, "catenary_steps": steps * substeps,
                 "fmu_steps": steps, "contact_loss_samples": int(lost.sum()),
                 "contact_loss_events": events}
