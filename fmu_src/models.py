@@ -10,6 +10,7 @@ Examples
 """
 from __future__ import annotations
 
+import pickle
 from dataclasses import replace
 from functools import lru_cache
 from pathlib import Path
@@ -24,7 +25,8 @@ from panto.fmu_src.pantograph import PHI1_SEARCH_RANGE, derive_pantograph, deriv
 from panto.fmu_src.parameters import ParameterError, ParameterSet
 from panto.fmu_src.sparsity import jacobian_structure
 from panto.fmu_src.spec import ModelSpec, Variable
-from panto.fmu_src.symbolic import MechanicalModel, cached_derivation
+from panto.fmu_src.symbolic import (MechanicalModel, cached_derivation, default_cache_dir, prune,
+                                    read_verified, source_digest, write_atomic)
 
 #: Models by name, each with the function that derives it.
 DERIVATIONS = {
@@ -135,8 +137,27 @@ def check_parameters(params: ParameterSet) -> None:
 def model_spec(name: str) -> ModelSpec:
     """The :class:`ModelSpec` (variables, parameters, generated C code) of one FMU.
 
-    ``"PantographLinear"`` is the pantograph's C code compiled in linearised mode.
+    ``"PantographLinear"`` is the pantograph's C code compiled in linearised mode. Generating the
+    C code and the Jacobian's sparsity takes 10-20 s for the pantograph, so the spec is pickled
+    in the cache folder of the derived models (:func:`panto.fmu_src.symbolic.default_cache_dir`),
+    keyed by :func:`panto.fmu_src.symbolic.source_digest` (every ``fmu_src/*.py``, SymPy's and
+    Python's versions) and checked by its SHA-256 like them.
     """
+    path = default_cache_dir() / f"{name}-{source_digest()}.spec.pickle"
+    payload = read_verified(path)
+    try:
+        spec = pickle.loads(payload) if payload is not None else None  # noqa: S301 - own file
+    except Exception:  # noqa: BLE001 - a bad pickle is generated again, whatever it raises
+        spec = None
+    if not isinstance(spec, ModelSpec) or spec.identifier != name:
+        spec = _generate_model_spec(name)
+        if write_atomic(path, pickle.dumps(spec, protocol=pickle.HIGHEST_PROTOCOL)):
+            prune(path.parent, f"{name}-*.spec.pickle")
+    return spec
+
+
+def _generate_model_spec(name: str) -> ModelSpec:
+    """The spec of :func:`model_spec`, derived and generated in this process."""
     linearised = name.endswith("Linear")
     model = symbolic_model(name.removesuffix("Linear"))
     if linearised:

@@ -77,6 +77,9 @@ class DemoSettings:
         Running speed [km/h].
     cosim_reference : bool
         Also run the EN 50318 reference pantograph (the line model's check).
+    workers : int
+        Processes for the two rig runs and their two videos, which are independent: 2 runs
+        them side by side, 1 one after the other in this process (same results).
     """
 
     run_duration: float | None = None
@@ -96,6 +99,7 @@ class DemoSettings:
     cosim_time_step: float | None = None
     cosim_speed: float = 300.0
     cosim_reference: bool = True
+    workers: int = 2
 
     @classmethod
     def full(cls) -> DemoSettings:

@@ -44,36 +44,79 @@ def build_fmus(state: dict[str, Any], progress: Progress) -> dict:
 
 
 def run_rig_campaign(state: dict[str, Any], progress: Progress) -> dict:
-    """Step 2a: the two runs on the virtual test bed, and the nominal model against each."""
+    """Step 2a: the two runs on the virtual test bed, and the nominal model against each.
+
+    The runs are independent: with ``settings.workers`` > 1 the second runs in a worker
+    process beside the first (its progress lines follow when it ends); the recorded files are
+    the same as one after the other (each run has its own bus, clock and noise seed).
+    """
+    out, settings = state["out"], state["settings"]
+    jobs = [(label, file, seed, _new_run_folder(out, label)) for label, file, seed in CAMPAIGN]
+    done = _side_by_side(_rig_run, [(out, state["fmus"], settings, *job) for job in jobs],
+                         settings.workers, progress)
+    labels = [label for label, *_ in jobs]
+    runs = {label: run for label, (run, _) in zip(labels, done)}
+    state["runs"] = {label: out / run["folder"] for label, run in runs.items()}
+    nominal = {label: fits for label, (_, fits) in zip(labels, done)}
+    return {"runs": runs, "nominal_model_fit_percent": nominal,
+            "plots": {label: f"{label}_run.png" for label in runs}}
+
+
+def _new_run_folder(out: Path, label: str) -> Path:
+    from panto.rig.recorder import new_run_folder
+
+    return new_run_folder(out / "runs", prefix=label)  # a rerun never overwrites a run
+
+
+def _side_by_side(function: Callable[..., Any], jobs: list[tuple], workers: int,
+                  progress: Progress) -> list[Any]:
+    """``[function(*job, progress) for job in jobs]``, the first job here, the others in up to
+    ``workers - 1`` worker processes at the same time (their progress lines follow at their end).
+    """
+    if workers <= 1 or len(jobs) < 2:
+        return [function(*job, progress) for job in jobs]
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(max_workers=min(workers - 1, len(jobs) - 1)) as pool:
+        futures = [pool.submit(_collecting, function, job) for job in jobs[1:]]
+        results = [function(*jobs[0], progress)]
+        for future in futures:
+            result, lines = future.result()
+            for line in lines:
+                progress(line)
+            results.append(result)
+    return results
+
+
+def _collecting(function: Callable[..., Any], job: tuple) -> tuple[Any, list[str]]:
+    """``function(*job, progress)`` in a worker process, with its progress lines collected."""
+    lines: list[str] = []
+    return function(*job, lines.append), lines
+
+
+def _rig_run(out: Path, fmus: Path, settings: Any, label: str, file: str, seed: int,
+             folder: Path, progress: Progress) -> tuple[dict, dict]:
+    """One run of the campaign into `folder` and the nominal model against it."""
     from dataclasses import replace
     from importlib.resources import files
 
     from panto.rig.profiles import load_profile
-    from panto.rig.recorder import new_run_folder
     from panto.rig.virtual import run_virtual_profile
 
-    out, settings = state["out"], state["settings"]
-    runs = {}
-    for label, file, seed in CAMPAIGN:
-        profile = load_profile(files("panto.rig") / "profiles" / file)
-        if settings.run_duration:
-            profile = replace(profile, duration=settings.run_duration)
-        folder = new_run_folder(out / "runs", prefix=label)  # a rerun never overwrites a run
-        clock = time.perf_counter()
-        result = run_virtual_profile(profile, fmu_path=state["fmus"] / "Pantograph.fmu",
-                                     folder=folder, seed=seed, progress=progress)
-        seconds = time.perf_counter() - clock
-        progress(f"{label}: {profile.name}, {profile.duration:g} s in {seconds:.1f} s wall, "
-                 f"{result.status}")
-        if not result.success:
-            raise RuntimeError(f"the {label} run did not complete: {result.status}")
-        runs[label] = {"profile": profile.name, "duration_s": profile.duration,
-                       "folder": str(folder.relative_to(out)), "wall_s": seconds}
-    state["runs"] = {label: out / run["folder"] for label, run in runs.items()}
-    nominal = {label: _nominal_against_measured(out, label, state["runs"][label], progress)
-               for label in runs}
-    return {"runs": runs, "nominal_model_fit_percent": nominal,
-            "plots": {label: f"{label}_run.png" for label in runs}}
+    profile = load_profile(files("panto.rig") / "profiles" / file)
+    if settings.run_duration:
+        profile = replace(profile, duration=settings.run_duration)
+    clock = time.perf_counter()
+    result = run_virtual_profile(profile, fmu_path=fmus / "Pantograph.fmu", folder=folder,
+                                 seed=seed, progress=progress)
+    seconds = time.perf_counter() - clock
+    progress(f"{label}: {profile.name}, {profile.duration:g} s in {seconds:.1f} s wall, "
+             f"{result.status}")
+    if not result.success:
+        raise RuntimeError(f"the {label} run did not complete: {result.status}")
+    run = {"profile": profile.name, "duration_s": profile.duration,
+           "folder": str(folder.relative_to(out)), "wall_s": seconds}
+    return run, _nominal_against_measured(out, label, folder, progress)
 
 
 def _nominal_against_measured(out: Path, label: str, folder: Path, progress: Progress) -> dict:
@@ -130,11 +173,13 @@ def plot_trajectories(t: np.ndarray, inputs: dict, zero: float, measured: dict, 
 
 def film_runs(state: dict[str, Any], progress: Progress) -> dict:
     """Step 2b: film, track, synchronise and merge a window of each run (camera at reduced
-    resolution: a 1080p frame costs ~37 s of rendering per 20 s of video on this machine)."""
+    resolution: a 1080p frame costs ~37 s of rendering per 20 s of video on this machine).
+
+    The runs are filmed side by side like :func:`run_rig_campaign` runs them.
+    """
     out, settings = state["out"], state["settings"]
-    videos = {}
-    for label, folder in state["runs"].items():
-        videos[label] = _film_one(label, folder, out / "video", settings, progress)
+    jobs = [(label, folder, out / "video", settings) for label, folder in state["runs"].items()]
+    videos = dict(zip(state["runs"], _side_by_side(_film_one, jobs, settings.workers, progress)))
     state["merged"] = {label: Path(v["merged_dataset"]) for label, v in videos.items()}
     confidences = [v["sync_confidence"] for v in videos.values()]
     return {"runs": {k: {**v, "merged_dataset": str(Path(v["merged_dataset"]).relative_to(out))}

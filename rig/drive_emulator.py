@@ -291,6 +291,7 @@ class DriveEmulator:
         if not low <= x0 <= high:
             raise ValueError(f"initial_position {x0} m is outside the travel {self._p.travel}")
         self._h = self._p.internal_step
+        self._gains = self._p.loop_gains
         self._ratio = round(self._p.listener_period / self._h)
         self._t0, self._steps = clock.now(), 0
         self._x, self._v, self._z, self._force, self._lag = x0, 0.0, 0.0, 0.0, 0.0
@@ -540,39 +541,57 @@ class DriveEmulator:
             self._listener(self.time, self._x, self._v)
 
     def _controlled_step(self, t: float, h: float) -> None:
-        """One classical Runge-Kutta step of the closed position loop (see the module notes)."""
+        """One classical Runge-Kutta step of the closed position loop (see the module notes).
+
+        Written out (no nested calls, no tuples): 1.5 million steps per 380 s of rig runs.
+        """
         p = self._p
-        k_i, k_p, k_d = p.loop_gains
+        k_i, k_p, k_d = self._gains
         m, f_max = p.moving_mass, p.peak_force
+        low, high = p.travel
         t0, r0, slope = (self._stream.segment(t + 0.5 * h) if self._stream is not None
                          else (t, self._hold, 0.0))
         load = self._current_load()
 
-        def derivatives(time: float, x: float, v: float, z: float) -> tuple[float, ...]:
-            r, r_dot = self._clip(r0 + slope * (time - t0), slope)
+        def rates(time: float, x: float, v: float, z: float) -> tuple[float, float, float]:
+            """(dx/dt, dv/dt, dz/dt) of the loop; the demand saturates at the peak force."""
+            r, r_dot = r0 + slope * (time - t0), slope
+            if r < low:
+                r, r_dot = low, 0.0
+            elif r > high:
+                r, r_dot = high, 0.0
             e = r - x
             demand = m * (k_i * z + k_p * e + k_d * (r_dot - v))
-            force = min(max(demand, -f_max), f_max)
-            winding_up = force != demand and (e > 0.0) == (demand > 0.0)
-            return v, (force + load) / m, 0.0 if winding_up else e, force, demand
+            force = f_max if demand > f_max else -f_max if demand < -f_max else demand
+            if force != demand and (e > 0.0) == (demand > 0.0):  # winding up: integrator held
+                return v, (force + load) / m, 0.0
+            return v, (force + load) / m, e
 
         x, v, z = self._x, self._v, self._z
-        a = derivatives(t, x, v, z)
-        b = derivatives(t + h / 2, x + h / 2 * a[0], v + h / 2 * a[1], z + h / 2 * a[2])
-        c = derivatives(t + h / 2, x + h / 2 * b[0], v + h / 2 * b[1], z + h / 2 * b[2])
-        d = derivatives(t + h, x + h * c[0], v + h * c[1], z + h * c[2])
-        self._x = x + h / 6 * (a[0] + 2 * b[0] + 2 * c[0] + d[0])
-        self._v = v + h / 6 * (a[1] + 2 * b[1] + 2 * c[1] + d[1])
-        self._z = z + h / 6 * (a[2] + 2 * b[2] + 2 * c[2] + d[2])
-        if a[3] != a[4]:
+        a0, a1, a2 = rates(t, x, v, z)
+        b0, b1, b2 = rates(t + h / 2, x + h / 2 * a0, v + h / 2 * a1, z + h / 2 * a2)
+        c0, c1, c2 = rates(t + h / 2, x + h / 2 * b0, v + h / 2 * b1, z + h / 2 * b2)
+        d0, d1, d2 = rates(t + h, x + h * c0, v + h * c1, z + h * c2)
+        self._x = x + h / 6 * (a0 + 2 * b0 + 2 * c0 + d0)
+        self._v = v + h / 6 * (a1 + 2 * b1 + 2 * c1 + d1)
+        self._z = z + h / 6 * (a2 + 2 * b2 + 2 * c2 + d2)
+        if abs(self._demand(t, x, v, z, t0, r0, slope)) > f_max:  # saturated at the step's start
             self.saturated_time += h
         r_end = self._clip(r0 + slope * (t + h - t0), slope)[0]
         self._lag = r_end - self._x
-        self._force = derivatives(t + h, self._x, self._v, self._z)[3]
+        demand = self._demand(t + h, self._x, self._v, self._z, t0, r0, slope)
+        self._force = min(max(demand, -f_max), f_max)
         self._warn = abs(self._lag) > p.following_error_warning
         self._warned = self._warned or self._warn
         if abs(self._lag) > p.following_error_limit:
             self._fault(ErrorCode.FOLLOWING_ERROR)
+
+    def _demand(self, time: float, x: float, v: float, z: float, t0: float, r0: float,
+                slope: float) -> float:
+        """The loop's force demand [N] at one instant (before the peak-force limit)."""
+        k_i, k_p, k_d = self._gains
+        r, r_dot = self._clip(r0 + slope * (time - t0), slope)
+        return self._p.moving_mass * (k_i * z + k_p * (r - x) + k_d * (r_dot - v))
 
     def _braking_step(self, h: float) -> None:
         deceleration = self._p.quick_stop_deceleration
