@@ -32,7 +32,8 @@ input-slope (``E(j h) = E(h)^j``: Franklin, Powell & Workman, *Digital Control o
 Systems*, sec. 6.3). Each sample is first tried whole in the current mode; the contact force
 predicted at its ``M`` sub-step instants costs one ``M x n`` product. When the force keeps its
 sign the whole-sample step is taken, otherwise the sample is run sub-step by sub-step, the mode
-chosen by the sign of ``g`` at each sub-step's start. Because the right-hand side is continuous,
+chosen by the sign of ``g`` at each sub-step's start (the whole-sample steps between switches
+are taken a stretch at a time, :func:`_run_switched`). Because the right-hand side is continuous,
 the switch's timing error (below ``h = T / M``) leaves a local error of order ``h^2``.
 A flight shorter than one sub-step, beginning and ending inside it, is not seen.
 """
@@ -186,24 +187,73 @@ def simulate_switched(model: ContactModel, u: np.ndarray, x0: np.ndarray, period
     return SwitchedRun(states, np.maximum(g, 0.0), g >= 0.0, True)
 
 
+#: Samples :func:`_run_switched` advances at once in contact and in flight.
+STRETCH, FLIGHT_STRETCH = 64, 16
+
+
 def _run_switched(modes: list[_Mode], states: np.ndarray, u: np.ndarray, slope: np.ndarray,
                   start: int, c_force: np.ndarray, d_force: np.ndarray, h: float) -> None:
-    """Overwrite ``states[start + 1:]`` by the switched recursion (module notes)."""
-    n = states.shape[1]
+    """Overwrite ``states[start + 1:]`` by the switched recursion (module notes).
+
+    `states` holds on entry the whole run in contact, ``X`` (a solution of the contact mode's
+    recursion ``x[k+1] = Phi x[k] + drive[k]``), so any stretch in contact from state ``x`` at
+    sample ``k`` is ``x[k+j] = X[k+j] + Phi^j (x - X[k])`` (the mode is stable: ``X`` stays
+    bounded); in flight (which need not be stable) ``x[k+j] = Phi^j x + sum_{i<j} Phi^{j-1-i}
+    drive[k+i]`` over at most :data:`FLIGHT_STRETCH` samples (:func:`_flight_maps`). A stretch is
+    taken at once, the force at the sub-step instants of all its samples checked at once, and
+    the stretch kept up to the first sample whose force changes sign, which :func:`_within` runs
+    across the switch. The same recursion as sample after sample, to rounding, without a Python
+    step per sample."""
+    n, last = states.shape[1], len(u) - 1
+    bilateral = states.copy()
+    powers = _powers(modes[IN_CONTACT].phi, STRETCH)
+    flight_powers, convolution = _flight_maps(modes[IN_FLIGHT].phi, FLIGHT_STRETCH)
     x = states[start].copy()
     mode = IN_CONTACT if float(c_force @ x + d_force @ u[start]) >= 0.0 else IN_FLIGHT
-    for k in range(start, len(u) - 1):
+    k = start
+    while k < last:
         current = modes[mode]
-        g = current.rows_x @ x + current.offsets[k]
-        wrong = g < 0.0 if mode == IN_CONTACT else g >= 0.0
-        if not wrong.any():
-            x = current.phi @ x + current.drive[k]
+        if mode == IN_CONTACT:
+            end = min(k + STRETCH, last)
+            run = bilateral[k:end + 1] + powers[:end - k + 1] @ (x - bilateral[k])
         else:
-            z = np.concatenate([x, u[k], slope[k]])
-            x, mode = _within(modes, mode, z, int(np.argmax(wrong)), g, c_force, d_force, h, n)
-        states[k + 1] = x
+            end = min(k + FLIGHT_STRETCH, last)
+            m = end - k
+            run = flight_powers[:m + 1] @ x
+            run[1:] += np.einsum("jiab,ib->ja", convolution[:m, :m], current.drive[k:end])
+        g = run[:-1] @ current.rows_x.T + current.offsets[k:end]
+        wrong = g < 0.0 if mode == IN_CONTACT else g >= 0.0
+        switching = np.flatnonzero(wrong.any(axis=1))
+        if len(switching) == 0:
+            states[k + 1:end + 1], x, k = run[1:], run[-1], end
+            continue
+        i = int(switching[0])
+        states[k + 1:k + i + 1] = run[1:i + 1]
+        z = np.concatenate([run[i], u[k + i], slope[k + i]])
+        x, mode = _within(modes, mode, z, int(np.argmax(wrong[i])), g[i], c_force, d_force, h, n)
+        k += i + 1
+        states[k] = x
     if not np.all(np.isfinite(states)):
         raise IdentificationError("switched simulation diverged (unilateral contact)")
+
+
+def _powers(phi: np.ndarray, count: int) -> np.ndarray:
+    """``Phi^j``, ``j = 0..count``, shape (count + 1, n, n)."""
+    powers = np.empty((count + 1,) + phi.shape)
+    powers[0] = np.eye(len(phi))
+    for j in range(count):
+        powers[j + 1] = phi @ powers[j]
+    return powers
+
+
+def _flight_maps(phi: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """``Phi^j`` (:func:`_powers`) and the convolution ``T[j - 1, i] = Phi^(j-1-i)`` for
+    ``i < j`` (zero otherwise), ``j = 1..count``: ``x[k+j] = Phi^j x[k] + sum_i T[j-1, i]
+    drive[k+i]``."""
+    powers = _powers(phi, count)
+    lag = np.arange(count)[:, None] - np.arange(count)[None, :]
+    convolution = np.where((lag >= 0)[:, :, None, None], powers[np.clip(lag, 0, count)], 0.0)
+    return powers, convolution
 
 
 def _within(modes: list[_Mode], mode: int, z: np.ndarray, first: int, g: np.ndarray,
