@@ -52,6 +52,8 @@ from scipy import signal as sps
 from panto.identification.estimation.base import IdentificationData, IdentificationError, ModelStructure
 from panto.identification.diagnosis.effects import (EFFECTS, SignalRoles, play_operator, sensor_acceleration,
                                     sensor_signal)
+from panto.identification.structures.oscillator_effects import oscillator_with_effect
+from panto.identification.structures.oscillators import OscillatorStructure
 from panto.identification.structures.rigid_body import motion
 
 INPUT_SIDE = ("input_delay", "actuator_lag", "dead_zone", "saturation")
@@ -103,14 +105,31 @@ def equivalent_input(nominal: ModelStructure, effect: str) -> str | None:
     return name if name in nominal.input_names else None
 
 
+def _with_effect(nominal: ModelStructure, effect: str, setting: Mapping[str, Any]
+                 ) -> ModelStructure:
+    """`nominal` with `effect` inside its dynamics: its own ``with_effect``, or for a two-/three-
+    mass oscillator :func:`~panto.identification.structures.oscillator_effects.oscillator_with_effect`
+    (friction on the masses, cubic springs); raises IdentificationError where there is none."""
+    if hasattr(nominal, "with_effect"):
+        return nominal.with_effect(effect, setting)
+    if isinstance(nominal, OscillatorStructure):
+        return oscillator_with_effect(nominal, effect, setting)
+    raise IdentificationError(f"{nominal.name}: no inside form for effect {effect!r}")
+
+
+def _innermost(structure: ModelStructure) -> ModelStructure:
+    """The model under every augmentation's wrapper."""
+    while isinstance(structure, AugmentedStructure):
+        structure = structure.base
+    return structure
+
+
 def _has_inside_form(nominal: ModelStructure, effect: str) -> bool:
     if isinstance(nominal, AugmentedStructure):
         return nominal.supports_inside(effect)
-    if not hasattr(nominal, "with_effect"):
-        return False
     try:
-        nominal.with_effect(effect, {"output": nominal.output_names[0],
-                                     "drive": (nominal.input_names or ("",))[0]})
+        _with_effect(nominal, effect, {"output": nominal.output_names[0],
+                                       "drive": (nominal.input_names or ("",))[0]})
     except IdentificationError:
         return False
     return True
@@ -167,16 +186,24 @@ class AugmentedStructure(ModelStructure):
             self.mode, self.base = "inside", unilateral
         elif effect in INSIDE + ("offset",) and _has_inside_form(nominal, effect):
             self.mode = "inside"
-            self.base = nominal.with_effect(effect, self.setting)
+            self.base = _with_effect(nominal, effect, self.setting)
         else:
             self._build_wrapper()
         if self.mode == "inside":
+            held = set(getattr(_innermost(self.base), "held_parameters", ()))
             self.effect_parameters = tuple(n for n in self.base.parameter_names
-                                           if n not in nominal.parameter_names)
+                                           if n not in nominal.parameter_names and n not in held)
         else:
             self.effect_parameters = tuple(self._starts)
         self.parameter_names = tuple(self.base.parameter_names) + tuple(
             n for n in self._starts if n not in self.base.parameter_names)
+
+    @property
+    def magnitude_parameters(self) -> tuple[str, ...]:
+        """This effect's size parameters, where the innermost model names them (one per mass or
+        spring of an oscillator); empty otherwise."""
+        return tuple(n for n in getattr(_innermost(self.base), "magnitude_parameters", ())
+                     if n in self.effect_parameters)
 
     # --- construction -------------------------------------------------------------------
     def _build_switch(self, nominal: ModelStructure, switch: str) -> None:
@@ -193,12 +220,12 @@ class AugmentedStructure(ModelStructure):
     def with_effect(self, effect: str, setting: Mapping[str, Any]) -> ModelStructure:
         """Push an inside effect down to the innermost model that takes it (keeps this one)."""
         if self.mode == "inside":
-            return AugmentedStructure(self.nominal_structure.with_effect(effect, setting),
+            return AugmentedStructure(_with_effect(self.nominal_structure, effect, setting),
                                       self.effect, self.roles, self.setting)
         inner = self.nominal_structure
         if not _has_inside_form(inner, effect):
             raise IdentificationError(f"{self.name}: no inside form for {effect!r}")
-        return AugmentedStructure(inner.with_effect(effect, setting), self.effect, self.roles,
+        return AugmentedStructure(_with_effect(inner, effect, setting), self.effect, self.roles,
                                   self.setting)
 
     def _build_wrapper(self) -> None:

@@ -59,6 +59,7 @@ import numpy as np
 from panto.identification.diagnosis.augmentations import AugmentedStructure, describe_augmentation
 from panto.identification.estimation.base import (IdentificationData, IdentificationError, ModelStructure,
                                  fit_percent)
+from panto.identification.diagnosis.parallel import map_trials, resolve_workers, trial_pool
 from panto.identification.diagnosis.ranking import rank_candidates
 from panto.identification.diagnosis.support import (IMPROVEMENT_FLOOR, NO_GAIN_REASONS, Refit, build_structure,
                                                default_roles, drift_test,
@@ -177,6 +178,18 @@ class Diagnosis:
                 "why": "a rig run designed so that the friction shows in the outputs beyond what "
                        "re-fitting the nominal can absorb (T-optimal; design of experiments)"}
 
+    def _repr_html_(self) -> str:
+        """A notebook's view: verdict, effects and summary, then the fits [%] per output."""
+        from panto.fmu_src.display import html_block, html_table
+
+        closed = self.gap_closed()
+        rows = [[o, self.fit_train.get(o), self.fit_before[o], self.fit_after[o],
+                 100.0 * closed[o]] for o in self.output_names]
+        table = html_table(["output", "fit on training (%)", "validation fit before (%)",
+                            "validation fit after (%)", "gap closed (%)"], rows)
+        return html_block(f"Diagnosis of {self.structure}: {self.verdict}", table, lines=[
+            f"effects: {', '.join(self.effects) or 'none'}", self.summary])
+
     def to_dict(self) -> dict:
         """JSON-ready: verdict, effects, per-output fits, where, rounds, steps, summary."""
         outputs = {o: {"fit_before": self.fit_before[o], "fit_after": self.fit_after[o],
@@ -207,6 +220,8 @@ class _Model:
     free: tuple[str, ...]
     std: dict[str, float] = field(default_factory=dict)
     covariance: np.ndarray | None = None
+    fit_train: dict[str, float] = field(default_factory=dict)
+    """Training fit [%] per output (empty: unknown)."""
 
 
 @dataclass(frozen=True)
@@ -243,12 +258,19 @@ class DiagnosisOptions:
     """When the verdict is ``unexplained``, search a library of candidate terms by sparse
     regression on the training residual and report the best refitted term as a hypothesis
     (:mod:`~panto.identification.diagnosis.discovery`)."""
+    workers: int | None = None
+    """Worker processes for a round's candidate refits (:mod:`~panto.identification.diagnosis.
+    parallel`; the verdict is the serial one): by default the CPUs available (one inside a
+    worker process); 1 runs them in this process."""
 
     def __post_init__(self) -> None:
         unknown = [c for c in self.candidates if c not in EFFECTS]
         if unknown:
             raise IdentificationError(f"unknown candidate effect(s) {unknown}; the vocabulary is "
                                       f"{EFFECTS}")
+        if self.workers is not None and int(self.workers) < 1:
+            raise IdentificationError(f"diagnosis option workers = {self.workers}: must be at "
+                                      "least 1 (or None: the CPUs available)")
         for name in ("max_effects", "max_refits", "folds", "max_evaluations"):
             if int(getattr(self, name)) < 1:
                 raise IdentificationError(f"diagnosis option {name} = {getattr(self, name)}: "
@@ -275,7 +297,8 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
     options : DiagnosisOptions
         Candidates, signal roles, search depth, folds, fit budget.
     executor : concurrent.futures.Executor, optional
-        Parallel Jacobian columns in the refits.
+        Parallel Jacobian columns in the nominal's fit; with more than one of
+        :attr:`DiagnosisOptions.workers`, a round's refits go to it instead of a process pool.
     progress : callable, optional
         Receives progress lines.
     """
@@ -299,14 +322,15 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
                                              progress)
         say("diagnose: adequacy: " + adequacy.message)
     model = _Model(nominal, dict(result.parameters), tuple(free), dict(result.std),
-                   np.asarray(result.covariance, float))
+                   np.asarray(result.covariance, float), dict(result.fit))
     say("diagnose: nominal fit on training: " + _fits(result.fit))
     if "global_fit" in result.details:
         say("diagnose: nominal " + result.details["global_fit"]["verdict"])
     before, analysis_before, gap, fit_before = _where(model, validation, roles, say)
-    search = _search(model, before, candidates,
-                     _Search(train, validation, roles, options, fit_options, say,
-                             adequacy.black_box_fit if adequacy else None))
+    with trial_pool(resolve_workers(options.workers), executor) as pool:
+        search = _search(model, before, candidates,
+                         _Search(train, validation, roles, options, fit_options, say,
+                                 _black_box_validation(adequacy, validation)), pool)
     model, current, rounds, steps, accepted = search
     analysis_after = _analyse(validation, current, model, roles) if steps else analysis_before
     remaining_gap = _gap(model, validation, current, roles) if steps else gap
@@ -380,11 +404,15 @@ class _Search:
     fit_options: Mapping[str, Any]
     say: Progress
     linear_level: Mapping[str, float] | None = None
+    """Validation fit [%] per output of the adequacy's black box (:attr:`DiagnosisOptions.
+    adequacy`), or None."""
     """Training fit of the best black box (:attr:`DiagnosisOptions.adequacy`), or None."""
 
 
-def _search(model: _Model, before: np.ndarray, candidates: Sequence[str], search: _Search):
-    """Rounds of rank, refit and judge until no candidate passes (module notes, step 3)."""
+def _search(model: _Model, before: np.ndarray, candidates: Sequence[str], search: _Search,
+            pool: Any = None):
+    """Rounds of rank, refit and judge until no candidate passes (module notes, step 3); a
+    round's refits on `pool` (:func:`~panto.identification.diagnosis.parallel.map_trials`)."""
     train, validation, roles, options = search.train, search.validation, search.roles, \
         search.options
     say = search.say
@@ -398,7 +426,7 @@ def _search(model: _Model, before: np.ndarray, candidates: Sequence[str], search
         say(f"diagnose: round {round_index + 1}: ranked on the training residual: " +
             (", ".join(f"{c['effect']} (ERR {c['err']:.3f})" for c in ranking["top"]) or
              "no significant candidate"))
-        trials = [_try(model, c, current, search) for c in ranking["top"]]
+        trials = map_trials(_try, model, ranking["top"], current, search, pool)
         passing = [t for t in trials if t[0].accepted]
         rounds.append({"ranking": ranking["per_output"], "tried": [t[0].__dict__ for t in trials]})
         if not passing:
@@ -588,16 +616,32 @@ def _hypothesis_text(report: Mapping[str, Any]) -> str:
     return f"{report.get('term', '?')} on {report.get('output', '?')}{fits}{share}"
 
 
+def _black_box_validation(adequacy: Any, validation: IdentificationData
+                          ) -> dict[str, float] | None:
+    """The adequacy black box's free-run fit [%] on the validation run, per output it was fitted
+    to; None without a black box (or where it cannot run on the validation run)."""
+    box = getattr(adequacy, "black_box", None)
+    if box is None or box.simulator is None:
+        return None
+    try:
+        data = validation.select_outputs(tuple(adequacy.black_box_fit))
+        return _fit(data, np.asarray(box.simulator(data), float))
+    except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError):
+        return None
+
+
 def _linear_explains(effect: str, trial: Mapping[str, Any],
                      level: Mapping[str, float] | None) -> dict[str, Any]:
-    """The trial's verdict fields, failed when a nonlinear effect does not fit training better than
-    the black box does on any output by the relevance floor (:attr:`DiagnosisOptions.adequacy`)."""
+    """The trial's verdict fields, failed when a nonlinear effect does not validate better than the
+    adequacy's linear black box (of the nominal's order and two more states) on any output by the
+    relevance floor (:attr:`DiagnosisOptions.adequacy`): on the withheld run, since the black box
+    has more parameters than the refitted structure, a training comparison favours it."""
     if level is None or effect not in NONLINEAR_EFFECTS:
         return {}
-    gains = {o: trial["fit_train"].get(o, math.nan) - level[o] for o in level}
+    gains = {o: trial["fit_validation"].get(o, math.nan) - level[o] for o in level}
     if any(g > IMPROVEMENT_FLOOR for g in gains.values()):
         return {}
-    reason = ("a linear black box fits training as well (" +
+    reason = ("a linear black box validates as well (" +
               ", ".join(f"{o} {g:+.2f} points" for o, g in gains.items()) +
               "): not named for a linear difference")
     return {"accepted": False, "failed": tuple(trial["failed"]) + (reason,)}
@@ -649,15 +693,41 @@ def _refit(structure: AugmentedStructure, model: _Model, train: IdentificationDa
     initial = {k: float(min(max(v, bounds[k][0]), bounds[k][1])) if k in bounds else v
                for k, v in initial.items()}
     neutral = [p for p in structure.effect_parameters if bounds[p][0] <= 0.0 <= bounds[p][1]]
+    own = tuple(p for p in structure.effect_parameters if p in free)
     result = None
     for factor in (1.0, 0.1, 0.0):
-        scaled = {p: starts[p] * factor for p in neutral}
-        result = fit_least_squares(structure, train, free=free, initial={**initial, **scaled},
-                                   **fit_options)
+        start = {**initial, **{p: starts[p] for p in structure.effect_parameters},
+                 **{p: starts[p] * factor for p in neutral}}
+        start = {k: float(min(max(v, bounds[k][0]), bounds[k][1])) if k in bounds else v
+                 for k, v in start.items()}
+        if own and factor == 1.0 and not from_defaults:
+            # staged: the effect's own parameters first, the nominal held where it is (a few
+            # well-conditioned unknowns), then everything from there; a joint start from a
+            # nominal in a valley otherwise lets the valley's directions take the steps
+            staged = fit_least_squares(structure, train, free=own, initial=start, **fit_options)
+            if not staged.message.startswith("model invalid"):
+                start = {**start, **{p: float(staged.parameters[p]) for p in own}}
+        result = fit_least_squares(structure, train, free=free, initial=start, **fit_options)
         if not result.message.startswith("model invalid"):
-            return result, _Model(structure, dict(result.parameters), free, dict(result.std),
-                                  np.asarray(result.covariance, float))
-    raise IdentificationError(f"{structure.name}: {result.message}")
+            break
+    else:
+        raise IdentificationError(f"{structure.name}: {result.message}")
+    if factor != 0.0 and neutral and not from_defaults and _below(result.fit, model.fit_train):
+        # the effect's ranked start led the refit below the model it extends (which the
+        # effect's neutral values reproduce): a local minimum; once more from the neutral values
+        again = fit_least_squares(structure, train, free=free,
+                                  initial={**initial, **{p: 0.0 for p in neutral}}, **fit_options)
+        if again.details.get("cost", math.inf) < result.details.get("cost", math.inf):
+            result = again
+    return result, _Model(structure, dict(result.parameters), free, dict(result.std),
+                          np.asarray(result.covariance, float), dict(result.fit))
+
+
+def _below(fit: Mapping[str, float], reference: Mapping[str, float]) -> bool:
+    """Whether the training fit `fit` [%] is on average below `reference` (a refit that ends
+    worse than the model it extends did not find the optimum)."""
+    common = [o for o in reference if o in fit]
+    return bool(common) and float(np.mean([fit[o] - reference[o] for o in common])) < 0.0
 
 
 def _choose(passing: Sequence[tuple[Trial, _Model, np.ndarray]], folds: int

@@ -316,9 +316,14 @@ def _significance(effect: str, structure: Any, own: Mapping[str, float],
     """``|theta| / sigma_theta`` of the effect's magnitude parameter (inf where it has none)."""
     if effect in NO_MAGNITUDE or not own:
         return math.inf
-    name = MAGNITUDE.get(effect, structure.effect_parameters[0])
-    s = std.get(name, math.nan)
-    return abs(own[name]) / s if s > 0 else (math.inf if s == 0 else 0.0)
+    names = [n for n in getattr(structure, "magnitude_parameters", ()) if n in own] or \
+        [MAGNITUDE.get(effect, structure.effect_parameters[0])]
+
+    def ratio(name: str) -> float:
+        s = std.get(name, math.nan)
+        return abs(own[name]) / s if s > 0 else (math.inf if s == 0 else 0.0)
+
+    return max(ratio(n) for n in names)
 
 
 def _fold_improvements(validation: IdentificationData, current: np.ndarray,

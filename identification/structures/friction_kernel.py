@@ -116,6 +116,73 @@ void friction_run(int n, long steps, int substeps, const double *phi, const doub
             x[n + i] += v_eps * flow(v[i], full[i], log_full[i], w[i], w0[i]);
     }
 }
+
+/* The nonlinear oscillators' Strang-splitting loop (panto.identification.structures.
+   oscillator_effects): per sub-step half a kick of the cubic springs and half a friction flow,
+   the exact linear flow, the other halves; the state recorded every `substeps` sub-steps.
+   x = [z; v] (2 n); phi row-major (2n x 2n); drive (steps x 2n); states row 0 filled by the
+   caller; decay[i] = F_f,i h / (2 m_i v_eps); kick[i] = h / (2 m_i); springs[i] = k_i kc_i;
+   centre[i] the spring's deflection at the operating point. */
+static void nonlinear_half(int n, double *x, const double *decay, double v_eps,
+                           const double *springs, const double *centre, const double *kick,
+                           int friction_first)
+{
+    double tension[3];
+    int i;
+    if (!friction_first) {
+        for (i = 0; i < n; i++) {
+            double d = x[i] - (i ? x[i - 1] : 0.0) - centre[i];
+            tension[i] = springs[i] * d * d * d;
+        }
+        for (i = 0; i < n; i++)
+            x[n + i] += kick[i] * (-tension[i] + (i + 1 < n ? tension[i + 1] : 0.0));
+    }
+    for (i = 0; i < n; i++) {
+        if (decay[i] > 0.0) {
+            double a = x[n + i] / v_eps;
+            if (a > 700.0) a = 700.0;
+            if (a < -700.0) a = -700.0;
+            x[n + i] += v_eps * (asinh(sinh(a) * exp(-decay[i])) - a);
+        }
+    }
+    if (friction_first) {
+        for (i = 0; i < n; i++) {
+            double d = x[i] - (i ? x[i - 1] : 0.0) - centre[i];
+            tension[i] = springs[i] * d * d * d;
+        }
+        for (i = 0; i < n; i++)
+            x[n + i] += kick[i] * (-tension[i] + (i + 1 < n ? tension[i + 1] : 0.0));
+    }
+}
+
+int nonlinear_run(int n, long steps, int substeps, const double *phi, const double *drive,
+                  double *x, const double *decay, double v_eps, const double *springs,
+                  const double *centre, const double *kick, double *states)
+{
+    const int m = 2 * n;
+    double next[6];
+    long step;
+    int i, k;
+    for (step = 0; step < steps; step++) {
+        const double *d = drive + (long)m * step;
+        nonlinear_half(n, x, decay, v_eps, springs, centre, kick, 0);
+        for (i = 0; i < m; i++) {
+            const double *row = phi + (long)m * i;
+            double y = d[i];
+            for (k = 0; k < m; k++) y += row[k] * x[k];
+            next[i] = y;
+        }
+        for (i = 0; i < m; i++) x[i] = next[i];
+        nonlinear_half(n, x, decay, v_eps, springs, centre, kick, 1);
+        for (i = 0; i < m; i++)
+            if (!isfinite(x[i])) return -1;
+        if ((step + 1) % substeps == 0) {
+            double *out = states + (long)m * ((step + 1) / substeps);
+            for (i = 0; i < m; i++) out[i] = x[i];
+        }
+    }
+    return 0;
+}
 """
 
 _POINTER = ctypes.c_void_p
@@ -172,6 +239,9 @@ def load_library() -> ctypes.CDLL | None:
     library.friction_run.restype = None
     library.friction_run.argtypes = [ctypes.c_int, ctypes.c_long, ctypes.c_int] + [_POINTER] * 5 \
         + [ctypes.c_double, _POINTER]
+    library.nonlinear_run.restype = ctypes.c_int
+    library.nonlinear_run.argtypes = [ctypes.c_int, ctypes.c_long, ctypes.c_int] + [_POINTER] * 4 \
+        + [ctypes.c_double] + [_POINTER] * 4
     return library
 
 
@@ -223,6 +293,45 @@ def friction_run(phi: np.ndarray, drive: np.ndarray, x: np.ndarray, substeps: in
                          *(a.ctypes.data for a in arrays[2:]), float(v_eps), states.ctypes.data)
 
 
+def nonlinear_run(phi: np.ndarray, drive: np.ndarray, x: np.ndarray, substeps: int,
+                  decay: np.ndarray, v_eps: float, springs: np.ndarray, centre: np.ndarray,
+                  kick: np.ndarray, states: np.ndarray) -> None:
+    """The nonlinear oscillators' splitting loop in C, filling ``states[1:]``
+    (:mod:`~panto.identification.structures.oscillator_effects`, whose Python loop is the reference).
+
+    Per sub-step: half a kick of the cubic springs, half a friction flow, the exact linear flow
+    (``Phi``, `drive`), the friction half, the kick half; ``decay[i] = F_f,i h / (2 m_i v_eps)``,
+    ``kick[i] = h / (2 m_i)`` [s/kg], ``springs[i] = k_i kc_i`` [N/m^3], ``centre[i]`` the spring's
+    deflection at the operating point [m]. `x` [m, m/s] is advanced in place.
+
+    Raises
+    ------
+    OSError
+        If the kernel is not available.
+    ArithmeticError
+        If the state stops being finite (the run diverged).
+    """
+    library = load_library()
+    if library is None:
+        raise OSError("the friction kernel could not be built (no C compiler?)")
+    n = len(decay)
+    if not 1 <= n <= MAX_MASSES:
+        raise ValueError(f"the kernel takes 1 to {MAX_MASSES} masses, not {n}")
+    arrays = [np.ascontiguousarray(a, dtype=float) for a in (phi, drive, decay, springs, centre,
+                                                              kick)]
+    for array, name in ((x, "x"), (states, "states")):
+        if array.dtype != np.float64 or not array.flags.c_contiguous:
+            raise ValueError(f"{name} must be a C-contiguous float64 array")
+    if arrays[1].shape[0] % substeps or states.shape[0] != arrays[1].shape[0] // substeps + 1:
+        raise ValueError("drive and states do not match the number of sub-steps")
+    status = library.nonlinear_run(n, arrays[1].shape[0], int(substeps), arrays[0].ctypes.data,
+                                   arrays[1].ctypes.data, x.ctypes.data, arrays[2].ctypes.data,
+                                   float(v_eps), *(a.ctypes.data for a in arrays[3:]),
+                                   states.ctypes.data)
+    if status != 0:
+        raise ArithmeticError("nonlinear oscillator: the simulation diverged")
+
+
 def friction_loop(phi: np.ndarray, drive: np.ndarray, x: np.ndarray, substeps: int,
                   half: np.ndarray, full: np.ndarray, v_eps: float, states: np.ndarray) -> None:
     """The reference: :func:`friction_run`'s loop in Python (same arguments, same effect)."""
@@ -252,5 +361,5 @@ def run(phi: np.ndarray, drive: np.ndarray, x: np.ndarray, substeps: int, half: 
     return "python"
 
 
-__all__ = ["run", "friction_run", "friction_loop", "load_library", "available", "enabled", "C_SOURCE", "SWITCH_VARIABLE",
+__all__ = ["run", "friction_run", "nonlinear_run", "friction_loop", "load_library", "available", "enabled", "C_SOURCE", "SWITCH_VARIABLE",
            "CACHE_VARIABLE", "MAX_MASSES"]
