@@ -56,7 +56,8 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from panto.identification.diagnosis.augmentations import AugmentedStructure, describe_augmentation
+from panto.identification.diagnosis.augmentations import (INSIDE, AugmentedStructure,
+                                                      describe_augmentation)
 from panto.identification.estimation.base import (IdentificationData, IdentificationError, ModelStructure,
                                  fit_percent)
 from panto.identification.diagnosis.parallel import map_trials, resolve_workers, trial_pool
@@ -553,6 +554,14 @@ def _try(model: _Model, candidate: Mapping[str, Any], current: np.ndarray,
             simulated = _simulate(new, validation)
         trial = judge_trial(candidate, Refit(structure, result, simulated), model, train,
                             validation, current, search.options.folds)
+        if not trial["accepted"] and effect in INSIDE:
+            # an effect inside the dynamics (contact loss, friction, a hardening spring) bends
+            # the nominal fitted without it far from its own optimum (a flying head fitted with
+            # a bilateral contact); the refit from there can stop short: once more from the
+            # structure's defaults, the better training cost kept
+            trial, result, new, simulated = _second_start(
+                candidate, structure, model, free, (trial, result, new, simulated), current,
+                search)
     except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError) as error:
         say(f"  {effect}: rejected: {stage} ({error})")
         trial = Trial(effect, candidate["variant"], candidate["err"], effect, {}, {}, math.nan,
@@ -564,6 +573,25 @@ def _try(model: _Model, candidate: Mapping[str, Any], current: np.ndarray,
         f"validation +{trial.improvement:.2f} points (fold spread {trial.fold_spread:.2f}): "
         + ("accepted" if trial.accepted else "rejected (" + ", ".join(trial.failed) + ")"))
     return trial, new, simulated
+
+
+def _second_start(candidate: Mapping[str, Any], structure: AugmentedStructure, model: _Model,
+                  free: tuple[str, ...], first: tuple, current: np.ndarray, search: _Search
+                  ) -> tuple:
+    """`first` = (trial, result, model, simulated) or the refit from the structure's defaults,
+    whichever reaches the lower training cost (a failure of the second start keeps the first)."""
+    train, validation = search.train, search.validation
+    try:
+        result, new = _refit(structure, model, train, free, search.fit_options,
+                             from_defaults=True)
+        simulated = _simulate(new, validation)
+    except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError):
+        return first
+    if not result.details.get("cost", math.inf) < first[1].details.get("cost", math.inf):
+        return first
+    trial = judge_trial(candidate, Refit(structure, result, simulated), model, train, validation,
+                        current, search.options.folds)
+    return trial, result, new, simulated
 
 
 def _adequacy_quietly(nominal: ModelStructure, result: Any, train: IdentificationData) -> Any:

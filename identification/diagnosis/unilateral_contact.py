@@ -337,8 +337,8 @@ class UnilateralContact(ModelStructure):
         by a constant column (all outputs ``(y_cb, xi, F_c)``)."""
         a, b, c, d, u, x0, hold = self._linear_form(parameters, data)
         model = ContactModel(a, b, c[2], d[2], contact_column(b, d[2], 0))
-        run = simulate_switched(model, u, x0, data.sample_period, hold=hold,
-                                substeps=self.substeps)
+        run = simulate_switched(model, u, resting_state(model, x0, u[0]), data.sample_period,
+                                hold=hold, substeps=self.substeps)
         return run, c, d, u
 
     def simulate(self, parameters, data) -> np.ndarray:
@@ -367,6 +367,22 @@ class UnilateralContact(ModelStructure):
         return a, b, c, d, u, nominal.equilibrium(parameters, u[0, 0], u[0, 1]), nominal.hold
 
 
+def resting_state(model: ContactModel, x0: np.ndarray, u0: np.ndarray) -> np.ndarray:
+    """The state at rest for the first input `u0`: `x0` (the bilateral model's equilibrium) where
+    its contact force is not negative, else the equilibrium in flight (the head held by its
+    suspension alone, ``(A + b_c c_F) x + (B + b_c d_F) u0 = 0``): a unilateral contact cannot
+    pull, so a run that starts with the head below the wire's reach starts off it."""
+    if float(model.c_force @ x0 + model.d_force @ u0) >= 0.0:
+        return x0
+    a = model.a + np.outer(model.column, model.c_force)
+    b = model.b + np.outer(model.column, model.d_force)
+    try:
+        return -np.linalg.solve(a, b @ u0)
+    except np.linalg.LinAlgError as error:
+        raise IdentificationError(f"unilateral contact: no equilibrium in flight ({error})") \
+            from error
+
+
 def _check_stable(a: np.ndarray, name: str, parameters) -> None:
     """The model in contact must be stable (as its bilateral structure requires); in flight it
     need not be: a pantograph without its wire rises under the uplift until it meets it."""
@@ -374,5 +390,6 @@ def _check_stable(a: np.ndarray, name: str, parameters) -> None:
         raise IdentificationError(f"{name}: unstable linear model for {dict(parameters)}")
 
 
-__all__ = ["SwitchedRun", "ContactModel", "UnilateralContact", "contact_column", "simulate_switched",
+__all__ = ["SwitchedRun", "ContactModel", "UnilateralContact", "contact_column", "resting_state",
+           "simulate_switched",
            "supports_unilateral", "SUBSTEPS"]
