@@ -54,13 +54,18 @@ def _all_fmus():
 
 def run_linearise(args: argparse.Namespace) -> int:
     """Static equilibrium and linearisation about an operating point."""
-    from panto.fmu_src.models import Model, load_parameters
+    from panto.fmu_src.models import FORCE_FMU_NAMES, Model, load_parameters
+    from panto.fmu_src.operating_point import force_model_inputs
 
     params = load_parameters(args.parameters, args.model) if args.parameters else None
     model = Model(args.model, params)
-    lin = model.linearise(args.eta, args.p)
+    inputs = {"eta": args.eta, "p": args.p}
+    if args.model in FORCE_FMU_NAMES:  # held where the displacement twin rests at (eta, p)
+        inputs = force_model_inputs(args.model, args.eta, args.p, model.parameters)
+        say("inputs: " + ", ".join(f"{name} = {value:.6g}" for name, value in inputs.items()))
+    lin = model.linearise(*inputs.values())
     result = {
-        "model": args.model, "eta": args.eta, "p": args.p,
+        "model": args.model, "eta": args.eta, "p": args.p, "inputs": inputs,
         "equilibrium": dict(zip(lin.state_names, lin.x0.tolist())),
         "outputs": dict(zip(lin.output_names, lin.y0.tolist())),
         "eigenvalues": [[ev.real, ev.imag] for ev in lin.eigenvalues],
@@ -70,9 +75,18 @@ def run_linearise(args: argparse.Namespace) -> int:
     for name, value in result["outputs"].items():
         say(f"{name:>6} = {value:.6g}")
     say("modes [Hz]: " + ", ".join(f"{f:.3f}" for f in lin.natural_frequencies_hz))
+    unstable = lin.eigenvalues[lin.eigenvalues.real > 0]
+    if unstable.size:
+        say("unstable eigenvalues [1/s]: " + ", ".join(
+            f"{ev.real:+.4g}" + (f" {ev.imag:+.4g}j" if ev.imag else "") for ev in unstable))
     if args.json:
         console.write_json(args.json, result)
     return 0
+
+
+#: The models ``panto linearise`` and ``panto parameters`` offer: displacement- and force-excited.
+_MODELS = ("Pantograph", "TwoMass", "ThreeMass", "PantographForce", "TwoMassForce",
+           "ThreeMassForce")
 
 
 def run_parameters(args: argparse.Namespace) -> int:
@@ -169,16 +183,18 @@ def _parser() -> tuple[argparse.ArgumentParser, dict[str, Callable]]:
                         "Linux, cross-compiled with ziglang)")
 
     p = add("linearise", run_linearise, "equilibrium, eigenvalues and A, B, C, D at (eta, p)")
-    p.add_argument("--model", default="Pantograph", choices=("Pantograph", "TwoMass", "ThreeMass"),
+    p.add_argument("--model", default="Pantograph", choices=_MODELS,
                    help="model (default Pantograph)")
-    p.add_argument("--eta", type=float, default=2.0, help="wire height [m]")
+    p.add_argument("--eta", type=float, default=2.0,
+                   help="wire height [m]; a force-excited model is held where its displacement "
+                        "twin rests at (eta, p): its contact force and bellow torque k_p p")
     p.add_argument("--p", type=non_negative_float, default=4.0,
                    help="bellow pressure [bar] (>= 0)")
     p.add_argument("--parameters", help="parameter file (JSON)")
     p.add_argument("--json", help="also write the result as JSON")
 
     p = add("parameters", run_parameters, "write a model's default parameter file")
-    p.add_argument("--model", default="Pantograph", choices=("Pantograph", "TwoMass", "ThreeMass"),
+    p.add_argument("--model", default="Pantograph", choices=_MODELS,
                    help="model (default Pantograph)")
     p.add_argument("--out", required=True, help="JSON file to write")
 

@@ -93,8 +93,8 @@ def run_diagnose(args: argparse.Namespace) -> int:
             f"{result.fit_after[output]:.2f} %")
     say(result.summary)
     if args.out:
-        paths = write_report(result, args.out)
-        say(f"wrote {paths['html']} and {paths['json']}")
+        paths = write_report(result, args.out, units=train.units)
+        say(f"wrote {paths['html']}, {paths['markdown']} and {paths['json']}")
     if args.json:
         write_json(args.json, result.to_dict())
     return 0

@@ -3,7 +3,8 @@
 ``panto identify RUN --model physical-linear [--validate RUN] [--free a b] [--fix k_ph=50000]
 [--method lm|nsga2] [--multistart N] [--initial auto|defaults|data] [--no-adequacy] [--workers N]
 [--out DIR] [--json FILE] [--rate 50] [--start S --stop S] [--keep-unidentifiable]`` prints the progress, a table (parameter, value,
-unit, std, 95 % interval, nominal, verdict) and the fits, and writes the parameter file, the result
+unit, std, 95 % interval, nominal, verdict) and the fits (with ``--correlations`` the correlation
+matrix of the estimates, also in the files), and writes the parameter file, the result
 JSON, its markdown summary and the plot into ``--out``. With ``lm``, parameters the run cannot
 pin are fixed at their prior and the rest refitted, unless ``--keep-unidentifiable``; with
 ``--initial data`` (the default, ``auto``, for the structures of :data:`DATA_STARTS`) the fit is
@@ -103,6 +104,12 @@ def run_identify(args: argparse.Namespace) -> int:
         if executor is not None:
             executor.shutdown()
     _print_result(result, validation)
+    if args.correlations:
+        from panto.identification.estimation.correlations import (correlation_lines,
+                                                                  parameter_correlations)
+
+        for line in correlation_lines(parameter_correlations(result)):
+            say(line)
     if "global_fit" in result.details:
         say(result.details["global_fit"]["verdict"])
     if "adequacy" in result.details:
@@ -112,13 +119,15 @@ def run_identify(args: argparse.Namespace) -> int:
     elif args.out:
         nominal = _nominal(args.model)
         paths = write_identification(result, args.out, data=data, validation=validation,
-                                     nominal=nominal, parameter_set=parameter_set(args.model))
+                                     nominal=nominal, parameter_set=parameter_set(args.model),
+                                     correlations=args.correlations)
         for path in paths.values():
             say(f"wrote {path}")
     if args.json:
         from panto.identification.estimation.reporting import result_summary
 
-        summary = result_summary(result, data=data, validation=validation)
+        summary = result_summary(result, data=data, validation=validation,
+                                 correlations=args.correlations)
         write_json(args.json, summary, default=str)
     return 0 if result.success else 1
 
@@ -211,6 +220,10 @@ def register(add: Callable[..., argparse.ArgumentParser]) -> None:
                         "the structure's order (adequacy: did the fit converge, can the "
                         "structure express the data's linear dynamics)")
     p.add_argument("--workers", type=positive_int, default=1, help="processes for the evaluations")
+    p.add_argument("--correlations", action="store_true",
+                   help="also print the correlation matrix of the estimates and add it to the "
+                        "--out reports and --json (parameters at a bound or fixed left out, "
+                        "named)")
     p.add_argument("--out", help="folder for parameters.json, result.json and fit.png")
     p.add_argument("--json", help="also write the result summary as JSON")
     add_data_options(p)

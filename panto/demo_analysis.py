@@ -138,7 +138,7 @@ def diagnose_gap(state: dict[str, Any], progress: Progress) -> dict:
     options = DiagnosisOptions(max_effects=settings.diagnosis_max_effects, **limit)
     result = diagnose(train, validation, structure="physical-linear", options=options,
                       progress=progress)
-    paths = write_report(result, out / "diagnosis")
+    paths = write_report(result, out / "diagnosis", units=train.units)
     closed = result.gap_closed()
     progress(f"verdict {result.verdict} ({', '.join(result.effects) or 'no effect'}); "
              "validation fit " + ", ".join(

@@ -7,30 +7,51 @@ PNGs beside them.
 The HTML answers the three questions in order: where the gap lies (validation fit, the residual
 spectra, error model, segments and correlations of the nominal model), which effect causes it
 (the FROLS ranking per round and every refitted candidate with its tests), how far it shrinks
-(fit before/after per output, band and segment energy before/after, effect parameters).
+(fit before/after per output, band and segment energy before/after, effect parameters with
+their units, :mod:`~panto.identification.diagnosis.units`). ``report.md`` is the verdict, the fits
+and the effect parameters as text; ``report.json`` holds each step's parameter ``units``.
 """
 from __future__ import annotations
 
 import json
 import math
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 
+from panto.identification.data.datasets import PANTOGRAPH_UNITS
 from panto.identification.diagnosis.residual_plots import plot_bands, plot_output_analysis, plot_series
+from panto.identification.diagnosis.units import UNKNOWN, effect_parameter_units
+from panto.identification.structures.registry import is_pantograph_structure
 
 
-def write_report(diagnosis: Any, folder: str | Path) -> dict[str, Path]:
+def write_report(diagnosis: Any, folder: str | Path, *,
+                 units: Mapping[str, str] | None = None) -> dict[str, Path]:
     """Write ``report.json``, the PNG plots, ``validation_series.csv`` (time, measured, nominal
-    and augmented outputs of the validation run) and ``report.html`` into `folder`; returns the
-    paths."""
+    and augmented outputs of the validation run), ``report.md`` and ``report.html`` into
+    `folder`; returns the paths.
+
+    `units` are the data's units by signal name (:attr:`IdentificationData.units`), from which
+    the effect parameters' units are derived (:func:`step_units`); for a structure on the rig
+    mapping, signals without one take the pantograph models' (``eta`` m, ``p`` bar, ``F_c`` N,
+    ``y_cb`` m: the units those models compute in).
+    """
     from panto import templating as t
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
+    units = {**(PANTOGRAPH_UNITS if is_pantograph_structure(diagnosis.structure) else {}),
+             **{k: v for k, v in (units or {}).items() if v}}
+    step_unit_maps = [step_units(diagnosis, step, units) for step in diagnosis.steps]
+    document = diagnosis.to_dict()
+    for step, unit_map in zip(document["steps"], step_unit_maps):
+        step["units"] = unit_map
+    document["data_units"] = units
     json_path = folder / "report.json"
-    json_path.write_text(json.dumps(diagnosis.to_dict(), indent=2))
+    json_path.write_text(json.dumps(document, indent=2))
+    markdown_path = folder / "report.md"
+    markdown_path.write_text(markdown_report(diagnosis, step_unit_maps))
     images = [plot_series(diagnosis, folder / "validation.png")]
     bands = plot_bands(diagnosis, folder / "bands.png")
     where_images = []
@@ -46,12 +67,12 @@ def write_report(diagnosis: Any, folder: str | Path) -> dict[str, Path]:
                 {"title": "2. Which effect: ranking on the training residual and refits",
                  "blocks": _which_blocks(diagnosis)},
                 {"title": "3. How far the gap shrinks (validation run)",
-                 "blocks": _shrink_blocks(diagnosis, bands)}]
+                 "blocks": _shrink_blocks(diagnosis, bands, step_unit_maps)}]
     html_path = folder / "report.html"
     html_path.write_text(t.render("sections.html.j2", title="Sim-to-real gap diagnosis: "
                                   f"{diagnosis.structure}", written="", head=_head(diagnosis),
                                   sections=sections), encoding="utf-8")
-    return {"json": json_path, "html": html_path, "images": images + where_images +
+    return {"json": json_path, "html": html_path, "markdown": markdown_path, "images": images + where_images +
             ([bands] if bands else []), **({"series": series} if series else {})}
 
 
@@ -93,7 +114,8 @@ def _which_blocks(diagnosis: Any) -> list[dict]:
     return blocks
 
 
-def _shrink_blocks(diagnosis: Any, bands: Path | None) -> list[dict]:
+def _shrink_blocks(diagnosis: Any, bands: Path | None,
+                   step_unit_maps: list[Mapping[str, str]]) -> list[dict]:
     from panto import templating as t
 
     closed = diagnosis.gap_closed()
@@ -101,10 +123,11 @@ def _shrink_blocks(diagnosis: Any, bands: Path | None) -> list[dict]:
                        "share of residual energy removed [%]"],
                       [[o, diagnosis.fit_before[o], diagnosis.fit_after[o],
                         _percent(closed[o])] for o in diagnosis.output_names])]
-    for step in diagnosis.steps:
-        rows = [[n, v, step.std.get(n, math.nan)] for n, v in step.parameters.items()]
+    for step, unit_map in zip(diagnosis.steps, step_unit_maps):
+        rows = [[n, v, step.std.get(n, math.nan), unit_map.get(n, UNKNOWN)]
+                for n, v in step.parameters.items()]
         blocks += [t.heading(step.effect), t.paragraph(step.description),
-                   t.table(["parameter", "value", "± (1 σ)"], rows),
+                   t.table(["parameter", "value", "± (1 σ)", "unit"], rows),
                    t.table(["output", "fit before [%]", "fit after [%]",
                             "residual energy removed [%]"],
                            [[o, step.fit_before[o], step.fit_after[o],
@@ -116,6 +139,48 @@ def _shrink_blocks(diagnosis: Any, bands: Path | None) -> list[dict]:
                                                        if diagnosis.remaining_gap["significant"]
                                                        else "within the noise")))
     return blocks
+
+
+def step_units(diagnosis: Any, step: Any, units: Mapping[str, str]) -> dict[str, str]:
+    """The units of an accepted `step`'s parameters (:func:`effect_parameter_units`), an
+    ``extra_mode`` gain's from the output it was ranked on and its drive signal."""
+    output, drive = _extra_mode_signals(diagnosis, step.effect)
+    return effect_parameter_units(step.parameters, units, output=output, drive=drive)
+
+
+def _extra_mode_signals(diagnosis: Any, effect: str) -> tuple[str | None, str | None]:
+    """(target output, drive) of the accepted candidate of `effect`: the ranking entry of its
+    round with the accepted trial's variant; (None, None) when not found."""
+    for round_ in diagnosis.rounds:
+        variants = {x["variant"] for x in round_.get("tried", ())
+                    if x["effect"] == effect and x["accepted"]}
+        for output, ranking in round_.get("ranking", {}).items():
+            for candidate in ranking.get("candidates", ()):
+                if candidate["effect"].split("@")[0] == effect and candidate["variant"] in variants:
+                    setting = candidate.get("setting") or {}
+                    return setting.get("output", output), setting.get("drive")
+    return None, None
+
+
+def markdown_report(diagnosis: Any, step_unit_maps: list[Mapping[str, str]]) -> str:
+    """``report.md``: the verdict, the validation fits before and after, and each accepted
+    effect's parameters with value, standard deviation and unit."""
+    from panto.templating import format_number
+
+    lines = [f"# Sim-to-real gap diagnosis: {diagnosis.structure}", "",
+             f"Verdict: {diagnosis.verdict}" + (f" ({' then '.join(diagnosis.effects)})"
+                                                 if diagnosis.effects else ""), "",
+             diagnosis.summary, "", "| output | fit before [%] | fit after [%] |", "|---|---|---|"]
+    lines += [f"| {o} | {format_number(diagnosis.fit_before[o])} | "
+              f"{format_number(diagnosis.fit_after[o])} |" for o in diagnosis.output_names]
+    for step, unit_map in zip(diagnosis.steps, step_unit_maps):
+        lines += ["", f"## {step.effect}", "", step.description, ""]
+        if step.parameters:
+            lines += ["| parameter | value | ± (1 σ) | unit |", "|---|---|---|---|"]
+            lines += [f"| {n} | {format_number(v, 5)} | "
+                      f"{format_number(step.std.get(n, math.nan), 3)} | "
+                      f"{unit_map.get(n, UNKNOWN)} |" for n, v in step.parameters.items()]
+    return "\n".join(lines) + "\n"
 
 
 def _percent(share: Any) -> float | None:
@@ -140,4 +205,4 @@ def _head(diagnosis: Any) -> list[dict]:
     return blocks
 
 
-__all__ = ["write_report"]
+__all__ = ["write_report", "step_units", "markdown_report"]

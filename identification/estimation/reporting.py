@@ -18,6 +18,10 @@
   (:mod:`panto.templating`). Intervals respect the sign (:func:`sign_respecting_interval`):
   log-normal for a parameter optimised on its logarithm, clipped at a lower bound of zero with
   a note, and a mark on every parameter at a bound, fixed at its prior or not identifiable.
+
+On request (``correlations=True``, ``panto identify --correlations``) the correlation matrix of
+the estimates (:func:`~panto.identification.estimation.correlations.parameter_correlations`)
+joins ``result.json`` (``correlations``), ``summary.md`` and ``report.html``.
 """
 from __future__ import annotations
 
@@ -30,18 +34,22 @@ from typing import Any, Mapping
 import numpy as np
 
 from panto.identification.estimation.base import IdentificationData, IdentificationResult
+from panto.identification.estimation.correlations import (correlation_blocks, correlation_table,
+                                                          parameter_correlations)
 from panto.identification.estimation.plots import plot_fit
 
 def write_identification(result: IdentificationResult, folder: str | Path, *,
                          data: IdentificationData,
                          validation: IdentificationData | None = None,
                          nominal: Mapping[str, float] | None = None,
-                         parameter_set: str | None = None) -> dict[str, Path]:
+                         parameter_set: str | None = None,
+                         correlations: bool = False) -> dict[str, Path]:
     """Write the parameter file, the result summary and the plot; returns their paths.
 
     `parameter_set` is the fmu_src model whose parameter file the result fills (``"Pantograph"``;
     :func:`panto.identification.structures.registry.parameter_set` of the structure), None for
-    plain JSON.
+    plain JSON. `correlations` adds the estimates' correlation matrix
+    (:func:`parameter_correlations`) to ``result.json``, ``summary.md`` and ``report.html``.
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -49,7 +57,8 @@ def write_identification(result: IdentificationResult, folder: str | Path, *,
                                             parameter_set=parameter_set),
              "result": folder / "result.json", "plot": folder / "fit.png",
              "summary": folder / "summary.md", "html": folder / "report.html"}
-    summary = result_summary(result, data=data, validation=validation, nominal=nominal)
+    summary = result_summary(result, data=data, validation=validation, nominal=nominal,
+                             correlations=correlations)
     paths["result"].write_text(json.dumps(summary, indent=2, default=_plain) + "\n")
     paths["summary"].write_text(markdown_summary(result, summary))
     result = replace(result, simulator=_SimulateOnce(result.simulator))  # plot and table
@@ -108,6 +117,8 @@ def html_report(result: IdentificationResult, summary: Mapping[str, Any],
             f"{k} {v:.1f} %" for k, v in validation.items()) + "."))
     records = parameter_records(result)
     blocks += parameter_blocks(records, (result.details.get("identifiability") or {}).get("rule"))
+    if summary.get("correlations"):
+        blocks += correlation_blocks(summary["correlations"])
     if plot is not None:
         blocks.append(t.figure(plot, "measured (grey) and simulated (black), free run"))
     return t.render("sections.html.j2", title=f"Identification: {result.structure} "
@@ -179,8 +190,10 @@ def write_parameters(result: IdentificationResult, path: str | Path, *,
 
 def result_summary(result: IdentificationResult, *, data: IdentificationData,
                    validation: IdentificationData | None = None,
-                   nominal: Mapping[str, float] | None = None) -> dict[str, Any]:
-    """The machine-readable summary of `result` (what ``result.json`` holds)."""
+                   nominal: Mapping[str, float] | None = None,
+                   correlations: bool = False) -> dict[str, Any]:
+    """The machine-readable summary of `result` (what ``result.json`` holds); `correlations`
+    adds ``correlations`` (:func:`parameter_correlations`)."""
     intervals = result.details.get("intervals_95", {})
     records = {r["name"]: r for r in parameter_records(result)}
     rows = {}
@@ -211,6 +224,8 @@ def result_summary(result: IdentificationResult, *, data: IdentificationData,
     if validation is not None:
         summary["validation"] = {"source": validation.source, "samples": len(validation),
                                  "fit_percent": _validation_fit(result, validation)}
+    if correlations:
+        summary["correlations"] = parameter_correlations(result)
     return summary
 
 
@@ -339,6 +354,9 @@ def markdown_summary(result: IdentificationResult, summary: Mapping[str, Any]) -
     rule = (result.details.get("identifiability") or {}).get("rule")
     if rule:
         parts += [f"Verdicts: {rule}.", ""]
+    if summary.get("correlations"):
+        parts += ["## Correlations of the estimates", "", correlation_table(
+            summary["correlations"]), ""]
     return "\n".join(parts)
 
 
