@@ -75,8 +75,12 @@ def test_the_hidden_effect_is_named_first_and_closes_the_gap(effect):
     train = _data(effect, setting, values, 1)
     validation = _data(effect, setting, values, 2)
     lines: list[str] = []
+    # the nominal as one LM run (adequacy off): the effect's cost is stated against that nominal;
+    # with the adequacy check (the default) a globally refitted nominal absorbs part of the 0.15 s
+    # lag (validation F_c 96.1 % before the effect), and the lag, still named first, closes less
     result = diagnose(train, validation, structure="physical-linear",
-                      options=DiagnosisOptions(max_effects=1), progress=lines.append)
+                      options=DiagnosisOptions(max_effects=1, adequacy=False),
+                      progress=lines.append)
     assert result.verdict == "effect" and result.effects[0] == effect, "\n".join(lines)
     step = result.steps[0]
     # the force fit on the withheld run rises and most of the residual energy goes

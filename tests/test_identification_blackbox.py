@@ -128,3 +128,15 @@ def test_bad_order_and_too_few_samples():
         fit_state_space(data, 0)
     with pytest.raises(IdentificationError, match="too few"):
         fit_state_space(data, 4)
+
+
+def test_a_mode_at_one_starts_at_rest_instead_of_failing():
+    """An integrator mode (pole exactly at 1) has no steady state for a constant input: the
+    filter then starts at rest on the input's deviation (a held-out diagnosis case crashed here
+    with a singular matrix)."""
+    from panto.identification.structures.blackbox import _steady_filter
+
+    x = np.array([2.0, 2.0, 3.0, 3.0, 3.0])
+    assert np.allclose(_steady_filter([0.0, 1.0], [1.0, -1.0], x), [0.0, 0.0, 0.0, 1.0, 2.0])
+    # a stable mode still starts in its steady state: 1 / (1 - 0.5) times the input
+    assert np.allclose(_steady_filter([0.0, 1.0], [1.0, -0.5], x)[:3], [4.0, 4.0, 4.0])

@@ -135,8 +135,14 @@ class BlockModel:
 
 
 def _steady_filter(b: Sequence[float], a: Sequence[float], x: np.ndarray) -> np.ndarray:
-    """``lfilter`` started in the steady state for the constant input ``x[0]``."""
-    y, _ = signal.lfilter(b, a, x, zi=signal.lfilter_zi(b, a) * x[0])
+    """``lfilter`` started in the steady state for the constant input ``x[0]``; a mode at
+    exactly 1 (an integrator: no steady state for a constant input) starts at rest on the
+    input's deviation from ``x[0]`` instead."""
+    try:
+        zi = signal.lfilter_zi(b, a) * x[0]
+    except np.linalg.LinAlgError:
+        return signal.lfilter(b, a, np.asarray(x, float) - x[0])
+    y, _ = signal.lfilter(b, a, x, zi=zi)
     return y
 
 
