@@ -28,20 +28,18 @@ integrator keeps its NumPy/LAPACK path, which gives the same iterates to round-o
 from __future__ import annotations
 
 import ctypes
-import hashlib
-import os
-import shutil
-import subprocess
-import tempfile
 from functools import lru_cache
-from pathlib import Path
 
 import numpy as np
 
+from panto.fmu_src import c_kernels
+
 #: Environment variable: ``0`` switches the compiled kernel off (NumPy/LAPACK path).
 SWITCH_VARIABLE = "PANTO_CATENARY_KERNEL"
+#: Compiler flags of the catenary kernels.
+FLAGS = ("-O3", "-fopenmp-simd")
 #: Environment variable naming the kernel cache folder (default ``~/.cache/panto/kernels``).
-CACHE_VARIABLE = "PANTO_KERNEL_CACHE"
+CACHE_VARIABLE = c_kernels.CACHE_VARIABLE
 #: Active-set passes of block pivoting before Murty's least-index rule takes over, and the most
 #: passes allowed (`panto.catenary_cosim.integration.SlackDropperSolver`, and the C step).
 BLOCK_PIVOTING_ITERATIONS = 20
@@ -394,46 +392,13 @@ class CatenaryState(ctypes.Structure):
 
 def enabled() -> bool:
     """False when ``$PANTO_CATENARY_KERNEL`` is ``0`` (or ``false``/``no``/``off``)."""
-    return os.environ.get(SWITCH_VARIABLE, "1").strip().lower() not in ("0", "false", "no", "off")
-
-
-def _cache_folder(source: str = C_SOURCE) -> Path:
-    base = os.environ.get(CACHE_VARIABLE) or Path.home() / ".cache" / "panto" / "kernels"
-    return Path(base) / hashlib.sha256(source.encode()).hexdigest()[:12]
-
-
-def _compiler() -> str | None:
-    for candidate in (os.environ.get("CC"), "cc", "gcc"):
-        if candidate and shutil.which(candidate):
-            return candidate
-    return None
+    return c_kernels.switched_on(SWITCH_VARIABLE)
 
 
 def build_library(source: str, name: str) -> ctypes.CDLL | None:
     """The shared library ``name.so`` compiled from the C `source` (cached by the source's
-    hash, built on first use), or None if it cannot be built."""
-    target = _cache_folder(source) / f"{name}.so"
-    try:
-        if not target.exists():
-            _build(target, source)
-        return ctypes.CDLL(str(target))
-    except (OSError, subprocess.SubprocessError):
-        return None
-
-
-def _build(target: Path, source_text: str) -> None:
-    """Compile `source_text` into the shared library ``target`` (atomically)."""
-    compiler = _compiler()
-    if compiler is None:
-        raise OSError("no C compiler ($CC, cc, gcc)")
-    target.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=target.parent) as scratch:
-        source = Path(scratch) / "catenary_step.c"
-        source.write_text(source_text)
-        built = Path(scratch) / target.name
-        subprocess.run([compiler, "-O3", "-fopenmp-simd", "-fPIC", "-shared", "-o", str(built),
-                        str(source), "-lm"], check=True, capture_output=True, timeout=120)
-        os.replace(built, target)
+    hash, built on first use: :mod:`panto.fmu_src.c_kernels`), or None if it cannot be built."""
+    return c_kernels.build_library(source, name, FLAGS)
 
 
 @lru_cache(maxsize=1)

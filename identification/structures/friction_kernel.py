@@ -28,20 +28,16 @@ keeps the Python loop.
 from __future__ import annotations
 
 import ctypes
-import hashlib
-import os
-import shutil
-import subprocess
-import tempfile
 from functools import lru_cache
-from pathlib import Path
 
 import numpy as np
+
+from panto.fmu_src import c_kernels
 
 #: Environment variable: ``0`` switches the compiled kernel off (the Python loop).
 SWITCH_VARIABLE = "PANTO_FRICTION_KERNEL"
 #: Environment variable naming the kernel cache folder (default ``~/.cache/panto/kernels``).
-CACHE_VARIABLE = "PANTO_KERNEL_CACHE"
+CACHE_VARIABLE = c_kernels.CACHE_VARIABLE
 
 C_SOURCE = r"""
 /* The friction oscillators' Strang-splitting loop (panto.identification.structures.friction_kernel).
@@ -192,49 +188,23 @@ MAX_MASSES = 3
 
 def enabled() -> bool:
     """False when ``$PANTO_FRICTION_KERNEL`` is ``0`` (or ``false``/``no``/``off``)."""
-    return os.environ.get(SWITCH_VARIABLE, "1").strip().lower() not in ("0", "false", "no", "off")
-
-
-def _cache_folder() -> Path:
-    base = os.environ.get(CACHE_VARIABLE) or Path.home() / ".cache" / "panto" / "kernels"
-    return Path(base) / hashlib.sha256(C_SOURCE.encode()).hexdigest()[:12]
+    return c_kernels.switched_on(SWITCH_VARIABLE)
 
 
 def _compiler() -> str | None:
-    for candidate in (os.environ.get("CC"), "cc", "gcc"):
-        if candidate and shutil.which(candidate):
-            return candidate
-    return None
-
-
-def _build(target: Path) -> None:
-    """Compile the source into the shared library ``target`` (atomically).
-
-    ``-ffp-contract=off``: no fused multiply-adds, so the products round as NumPy's do.
-    """
-    compiler = _compiler()
-    if compiler is None:
-        raise OSError("no C compiler ($CC, cc, gcc)")
-    target.parent.mkdir(parents=True, exist_ok=True)
-    with tempfile.TemporaryDirectory(dir=target.parent) as scratch:
-        source = Path(scratch) / "friction_run.c"
-        source.write_text(C_SOURCE)
-        built = Path(scratch) / target.name
-        subprocess.run([compiler, "-O2", "-ffp-contract=off", "-fPIC", "-shared", "-o",
-                        str(built), str(source), "-lm"],
-                       check=True, capture_output=True, timeout=120)
-        os.replace(built, target)
+    return c_kernels.find_compiler()
 
 
 @lru_cache(maxsize=1)
 def load_library() -> ctypes.CDLL | None:
-    """The compiled kernel (built into the cache on first use), or None if it cannot be built."""
-    target = _cache_folder() / "friction_run.so"
-    try:
-        if not target.exists():
-            _build(target)
-        library = ctypes.CDLL(str(target))
-    except (OSError, subprocess.SubprocessError):
+    """The compiled kernel (built into the cache on first use: :mod:`panto.fmu_src.c_kernels`),
+    or None if it cannot be built.
+
+    ``-ffp-contract=off``: no fused multiply-adds, so the products round as NumPy's do.
+    """
+    library = c_kernels.build_library(C_SOURCE, "friction_run", ("-O2", "-ffp-contract=off"),
+                                      find=lambda: _compiler())
+    if library is None:
         return None
     library.friction_run.restype = None
     library.friction_run.argtypes = [ctypes.c_int, ctypes.c_long, ctypes.c_int] + [_POINTER] * 5 \
