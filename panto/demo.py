@@ -67,6 +67,10 @@ class DemoSettings:
         NSGA-II for the Pareto front (thesis Fig. 4.7); population 0: no front.
     diagnosis_max_effects : int
         Effects the diagnosis may accept.
+    diagnosis_light : bool
+        A smoke-test diagnosis: the adequacy check's global refit with one data-driven start
+        (from a small frequency-response search) and no perturbations, and no discovery search
+        (the quick demo; the full one searches fully).
     doe_duration : float
         Length of the designed rig run [s].
     doe_population, doe_generations : int
@@ -92,6 +96,7 @@ class DemoSettings:
     pareto_population: int = 24
     pareto_generations: int = 12
     diagnosis_max_effects: int = 2
+    diagnosis_light: bool = False
     doe_duration: float = 60.0
     doe_population: int = 20
     doe_generations: int = 20
@@ -113,6 +118,7 @@ class DemoSettings:
                    fmi_versions=(2,), video_window=7.0, video_scale=0.25,
                    structures=("physical-linear", "blackbox-4"), max_evaluations=300,
                    pareto_population=8, pareto_generations=3, diagnosis_max_effects=1,
+                   diagnosis_light=True,
                    doe_duration=10.0, doe_population=6, doe_generations=2,
                    cosim_element_length=0.5, cosim_time_step=1e-3, cosim_reference=False)
 
