@@ -40,7 +40,7 @@ def _exclusive(lock_file: Path):
 
 @pytest.fixture(scope="session")
 def project_fmus(tmp_path_factory):
-    """The displacement-excited FMUs of ``panto build-fmu`` (FMI 2.0 and 3.0), as {file name: path}.
+    """The displacement-excited FMUs of ``panto build-fmu`` (FMI 2.0 and 3.0), as {file name: BuiltFmu}.
 
     The force-excited ones are :func:`force_fmus` (a separate fixture: they would add about
     20 s to every run that needs only these).
@@ -48,18 +48,9 @@ def project_fmus(tmp_path_factory):
     Built once per run: the first worker builds them and records the result; the others wait on
     the lock and read the record.
     """
-    from panto.build_fmu.project import build_project_fmus
     from panto.fmu_src.models import DISPLACEMENT_FMU_NAMES
 
-    folder = _shared_folder(tmp_path_factory, "fmus")
-    record = folder / "built.pickle"
-    with _exclusive(folder / "build.lock"):
-        if record.exists():
-            built = pickle.loads(record.read_bytes())
-        else:
-            built = build_project_fmus(folder, names=DISPLACEMENT_FMU_NAMES)
-            record.write_bytes(pickle.dumps(built))
-    return {b.path.name: b for b in built}
+    return _built_once(tmp_path_factory, "fmus", DISPLACEMENT_FMU_NAMES)
 
 
 @pytest.fixture(scope="session")
@@ -68,16 +59,24 @@ def force_fmus(tmp_path_factory):
 
     Built once per run like :func:`project_fmus`.
     """
-    from panto.build_fmu.project import build_project_fmus
     from panto.fmu_src.models import FORCE_FMU_NAMES
 
-    folder = _shared_folder(tmp_path_factory, "force_fmus")
+    return _built_once(tmp_path_factory, "force_fmus", FORCE_FMU_NAMES)
+
+
+def _built_once(tmp_path_factory, name: str, models) -> dict:
+    """`models` built by ``panto build-fmu`` once per run into the shared folder `name`: the first
+    worker builds them and records the result; the others wait on the lock and read the record.
+    {file name: BuiltFmu}."""
+    from panto.build_fmu.project import build_project_fmus
+
+    folder = _shared_folder(tmp_path_factory, name)
     record = folder / "built.pickle"
     with _exclusive(folder / "build.lock"):
         if record.exists():
             built = pickle.loads(record.read_bytes())
         else:
-            built = build_project_fmus(folder, names=FORCE_FMU_NAMES)
+            built = build_project_fmus(folder, names=models)
             record.write_bytes(pickle.dumps(built))
     return {b.path.name: b for b in built}
 

@@ -246,21 +246,31 @@ def friction_run(phi: np.ndarray, drive: np.ndarray, x: np.ndarray, substeps: in
     OSError
         If the kernel is not available.
     """
+    library, arrays = _checked(x, states, substeps, phi, drive, half, full)
+    n = len(half)
+    library.friction_run(n, arrays[1].shape[0], int(substeps),
+                         *(a.ctypes.data for a in arrays[:2]), x.ctypes.data,
+                         *(a.ctypes.data for a in arrays[2:]), float(v_eps), states.ctypes.data)
+
+
+def _checked(x: np.ndarray, states: np.ndarray, substeps: int, phi: np.ndarray,
+             drive: np.ndarray, per_mass: np.ndarray, *more: np.ndarray
+             ) -> tuple[ctypes.CDLL, list[np.ndarray]]:
+    """The loaded kernel and ``(phi, drive, per_mass, *more)`` as contiguous float64 arrays, after
+    the checks both entry points share (the masses, the in-place buffers, the sub-step count)."""
     library = load_library()
     if library is None:
         raise OSError("the friction kernel could not be built (no C compiler?)")
-    n = len(half)
+    n = len(per_mass)
     if not 1 <= n <= MAX_MASSES:
         raise ValueError(f"the friction kernel takes 1 to {MAX_MASSES} masses, not {n}")
-    arrays = [np.ascontiguousarray(a, dtype=float) for a in (phi, drive, half, full)]
+    arrays = [np.ascontiguousarray(a, dtype=float) for a in (phi, drive, per_mass, *more)]
     for array, name in ((x, "x"), (states, "states")):
         if array.dtype != np.float64 or not array.flags.c_contiguous:
             raise ValueError(f"{name} must be a C-contiguous float64 array")
     if arrays[1].shape[0] % substeps or states.shape[0] != arrays[1].shape[0] // substeps + 1:
         raise ValueError("drive and states do not match the number of sub-steps")
-    library.friction_run(n, arrays[1].shape[0], int(substeps),
-                         *(a.ctypes.data for a in arrays[:2]), x.ctypes.data,
-                         *(a.ctypes.data for a in arrays[2:]), float(v_eps), states.ctypes.data)
+    return library, arrays
 
 
 def nonlinear_run(phi: np.ndarray, drive: np.ndarray, x: np.ndarray, substeps: int,
@@ -281,19 +291,8 @@ def nonlinear_run(phi: np.ndarray, drive: np.ndarray, x: np.ndarray, substeps: i
     ArithmeticError
         If the state stops being finite (the run diverged).
     """
-    library = load_library()
-    if library is None:
-        raise OSError("the friction kernel could not be built (no C compiler?)")
+    library, arrays = _checked(x, states, substeps, phi, drive, decay, springs, centre, kick)
     n = len(decay)
-    if not 1 <= n <= MAX_MASSES:
-        raise ValueError(f"the kernel takes 1 to {MAX_MASSES} masses, not {n}")
-    arrays = [np.ascontiguousarray(a, dtype=float) for a in (phi, drive, decay, springs, centre,
-                                                              kick)]
-    for array, name in ((x, "x"), (states, "states")):
-        if array.dtype != np.float64 or not array.flags.c_contiguous:
-            raise ValueError(f"{name} must be a C-contiguous float64 array")
-    if arrays[1].shape[0] % substeps or states.shape[0] != arrays[1].shape[0] // substeps + 1:
-        raise ValueError("drive and states do not match the number of sub-steps")
     status = library.nonlinear_run(n, arrays[1].shape[0], int(substeps), arrays[0].ctypes.data,
                                    arrays[1].ctypes.data, x.ctypes.data, arrays[2].ctypes.data,
                                    float(v_eps), *(a.ctypes.data for a in arrays[3:]),

@@ -195,14 +195,6 @@ def _deflections(z: np.ndarray) -> np.ndarray:
     return np.diff(z, prepend=0.0)
 
 
-def _spring_forces(z: np.ndarray, centre: np.ndarray, springs: np.ndarray) -> np.ndarray:
-    """Force on every mass [N] from the cubic terms ``k_i kc_i (d_i - d_i0)^3`` of the chain."""
-    tension = springs * (_deflections(z) - centre) ** 3
-    force = -tension
-    force[:-1] += tension[1:]
-    return force
-
-
 def _simulate_nonlinear(a: np.ndarray, b: np.ndarray, u: np.ndarray, x0: np.ndarray,
                         period: float, substeps: int, hold: str, friction: np.ndarray,
                         v_eps: float, springs: np.ndarray, mass: np.ndarray,
