@@ -10,7 +10,8 @@ import math
 import numpy as np
 import pytest
 
-from panto.identification.diagnosis.pipeline import DiagnosisOptions, _linear_explains, diagnose
+from panto.identification.diagnosis.pipeline import DiagnosisOptions, diagnose
+from panto.identification.diagnosis.refit import linear_explains
 from panto.identification.estimation.base import IdentificationData, fit_percent
 from panto.identification.estimation.global_fit import GlobalFitOptions, fit_global
 from panto.identification.estimation.least_squares import fit_least_squares
@@ -73,12 +74,12 @@ def test_a_nonlinear_effect_must_beat_the_black_box_on_the_withheld_run():
     trial = {"fit_validation": {"F_c": 90.1}, "fit_train": {"F_c": 99.0}, "failed": (),
              "accepted": True}
     level = {"F_c": 90.0}
-    verdict = _linear_explains("coulomb_friction", trial, level)
+    verdict = linear_explains("coulomb_friction", trial, level)
     assert verdict["accepted"] is False and "linear black box" in verdict["failed"][0]
-    assert _linear_explains("actuator_lag", trial, level) == {}  # a linear effect may close it
-    assert _linear_explains("coulomb_friction", {**trial, "fit_validation": {"F_c": 91.0},
+    assert linear_explains("actuator_lag", trial, level) == {}  # a linear effect may close it
+    assert linear_explains("coulomb_friction", {**trial, "fit_validation": {"F_c": 91.0},
                                                  "fit_train": {"F_c": 80.0}}, level) == {}
-    assert _linear_explains("coulomb_friction", trial, None) == {}
+    assert linear_explains("coulomb_friction", trial, None) == {}
 
 
 def test_the_diagnosis_refits_a_stuck_nominal_instead_of_naming_its_misfit(train):

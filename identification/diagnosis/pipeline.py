@@ -52,52 +52,27 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from panto.identification.diagnosis.augmentations import (INSIDE, AugmentedStructure,
-                                                      describe_augmentation)
-from panto.identification.estimation.base import (IdentificationData, IdentificationError, ModelStructure,
-                                 fit_percent)
+from panto.identification.diagnosis.effects import EFFECTS, SignalRoles
+from panto.identification.diagnosis.nominal import (Progress, adequacy_quietly, adequate_nominal,
+                                                    black_box_validation, fit_nominal,
+                                                    fit_per_output, indented, simulate)
 from panto.identification.diagnosis.parallel import map_trials, resolve_workers, trial_pool
 from panto.identification.diagnosis.ranking import rank_candidates
-from panto.identification.diagnosis.support import (IMPROVEMENT_FLOOR, NO_GAIN_REASONS, Refit, build_structure,
-                                               default_roles, drift_test,
-                                               effective_samples, gap_significance, judge_trial,
-                                               retuning,
-                                               settling_time, systematic_cost, where_summary)
-from panto.identification.diagnosis.effects import EFFECTS, NONLINEAR_EFFECTS, SignalRoles
-from panto.identification.estimation.global_fit import GlobalFitOptions, fit_from_start
-from panto.identification.estimation.least_squares import fit_least_squares
-from panto.identification.structures.adequacy import check_adequacy
+from panto.identification.diagnosis.refit import Model, Search, Trial, try_candidate
 from panto.identification.diagnosis.residual_analysis import (ErrorModelOptions, OutputAnalysis,
                                                              analyse_residuals)
 from panto.identification.diagnosis.residual_energy import jsonable
-
-Progress = Callable[[str], None]
-
-
-@dataclass(frozen=True)
-class Trial:
-    """One candidate refitted in one round and how it was judged."""
-
-    effect: str
-    variant: str
-    err: float
-    description: str
-    parameters: Mapping[str, float]
-    std: Mapping[str, float]
-    significance: float
-    delta_bic: float
-    improvement: float
-    fold_improvements: tuple[float, ...]
-    fold_spread: float
-    fit_train: Mapping[str, float]
-    fit_validation: Mapping[str, float]
-    accepted: bool = False
-    failed: tuple[str, ...] = ()
-    message: str = ""
+from panto.identification.diagnosis.support import (NO_GAIN_REASONS, build_structure,
+                                                    default_roles, drift_test, effective_samples,
+                                                    gap_significance, retuning, settling_time,
+                                                    systematic_cost, where_summary)
+from panto.identification.estimation.base import (IdentificationData, IdentificationError,
+                                                  ModelStructure)
+from panto.identification.estimation.global_fit import GlobalFitOptions
 
 
 @dataclass(frozen=True)
@@ -212,19 +187,6 @@ class Diagnosis:
             "wall_time": self.wall_time})
 
 
-@dataclass
-class _Model:
-    """The current model of the search: structure, parameters, free parameters."""
-
-    structure: ModelStructure
-    parameters: dict[str, float]
-    free: tuple[str, ...]
-    std: dict[str, float] = field(default_factory=dict)
-    covariance: np.ndarray | None = None
-    fit_train: dict[str, float] = field(default_factory=dict)
-    """Training fit [%] per output (empty: unknown)."""
-
-
 @dataclass(frozen=True)
 class DiagnosisOptions:
     """How far :func:`diagnose` searches and how it judges (the module notes give the tests)."""
@@ -318,33 +280,33 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
     fit_options = {"executor": executor, "max_evaluations": options.max_evaluations}
     say(f"diagnose: nominal {nominal.name}, {len(free)} free parameters, {len(train)} training "
         f"and {len(validation)} validation samples, outputs {list(train.output_names)}")
-    result = fit_nominal(nominal, free, train, progress=_indent(progress),
+    result = fit_nominal(nominal, free, train, progress=indented(progress),
                          global_fit=options.global_fit, **fit_options)
     adequacy = None
     if options.adequacy:
-        result, adequacy = _adequate_nominal(nominal, free, train, result, options, fit_options,
-                                             progress)
+        result, adequacy = adequate_nominal(nominal, free, train, result, options.global_fit,
+                                            fit_options, progress)
         say("diagnose: adequacy: " + adequacy.message)
-    model = _Model(nominal, dict(result.parameters), tuple(free), dict(result.std),
-                   np.asarray(result.covariance, float), dict(result.fit))
+    model = Model(nominal, dict(result.parameters), tuple(free), dict(result.std),
+                  np.asarray(result.covariance, float), dict(result.fit))
     say("diagnose: nominal fit on training: " + _fits(result.fit))
     if "global_fit" in result.details:
         say("diagnose: nominal " + result.details["global_fit"]["verdict"])
     before, analysis_before, gap, fit_before = _where(model, validation, roles, say)
     with trial_pool(resolve_workers(options.workers), executor) as pool:
         search = _search(model, before, candidates,
-                         _Search(train, validation, roles, options, fit_options, say,
-                                 _black_box_validation(adequacy, validation)), pool)
+                         Search(train, validation, roles, options, fit_options, say,
+                                 black_box_validation(adequacy, validation)), pool)
     model, current, rounds, steps, accepted = search
     analysis_after = _analyse(validation, current, model, roles) if steps else analysis_before
     remaining_gap = _gap(model, validation, current, roles) if steps else gap
     verdict = "effect" if steps else ("unexplained" if gap["significant"] else "none")
-    fit_after = _fit(validation, current)
+    fit_after = fit_per_output(validation, current)
     where = where_summary(analysis_before, validation)
     summary = _summary(verdict, accepted, fit_before, fit_after, where, remaining_gap) + \
         _training_only_text(_training_only(rounds, accepted))
     hypothesis = _discovery(model, train, validation, executor, progress,
-                            adequacy or _adequacy_quietly(nominal, result, train)) \
+                            adequacy or adequacy_quietly(nominal, result, train)) \
         if verdict == "unexplained" and options.discovery else None
     if hypothesis is not None and hypothesis.get("term") is None:
         summary += f" Discovery not run: {hypothesis['summary']}"
@@ -383,37 +345,20 @@ def _uncovered(candidates: Sequence[str], nominal: ModelStructure, say: Progress
     return [c for c in candidates if c not in covered]
 
 
-def _where(model: _Model, validation: IdentificationData, roles: SignalRoles, say: Progress
+def _where(model: Model, validation: IdentificationData, roles: SignalRoles, say: Progress
            ) -> tuple[np.ndarray, list[OutputAnalysis], dict[str, Any], dict[str, float]]:
     """The nominal's free run on the validation run, its residual analysis, the gap and the fit
     per output (module notes, step 2)."""
-    before = _simulate(model, validation)
+    before = simulate(model, validation)
     analysis_before = _analyse(validation, before, model, roles)
     gap = _gap(model, validation, before, roles)
-    fit_before = _fit(validation, before)
+    fit_before = fit_per_output(validation, before)
     say("diagnose: where: validation fit " + _fits(fit_before) + "; gap " +
         ("significant: " + "; ".join(gap["reasons"]) if gap["significant"] else "within the noise"))
     return before, analysis_before, gap, fit_before
 
 
-@dataclass(frozen=True, eq=False)
-class _Search:
-    """What every round of the search shares: the runs, the signal roles, the options, the
-    refits' least-squares options and the progress sink."""
-
-    train: IdentificationData
-    validation: IdentificationData
-    roles: SignalRoles
-    options: DiagnosisOptions
-    fit_options: Mapping[str, Any]
-    say: Progress
-    linear_level: Mapping[str, float] | None = None
-    """Validation fit [%] per output of the adequacy's black box (:attr:`DiagnosisOptions.
-    adequacy`), or None."""
-    """Training fit of the best black box (:attr:`DiagnosisOptions.adequacy`), or None."""
-
-
-def _search(model: _Model, before: np.ndarray, candidates: Sequence[str], search: _Search,
+def _search(model: Model, before: np.ndarray, candidates: Sequence[str], search: Search,
             pool: Any = None):
     """Rounds of rank, refit and judge until no candidate passes (module notes, step 3); a
     round's refits on `pool` (:func:`~panto.identification.diagnosis.parallel.map_trials`)."""
@@ -430,7 +375,7 @@ def _search(model: _Model, before: np.ndarray, candidates: Sequence[str], search
         say(f"diagnose: round {round_index + 1}: ranked on the training residual: " +
             (", ".join(f"{c['effect']} (ERR {c['err']:.3f})" for c in ranking["top"]) or
              "no significant candidate"))
-        trials = map_trials(_try, model, ranking["top"], current, search, pool)
+        trials = map_trials(try_candidate, model, ranking["top"], current, search, pool)
         passing = [t for t in trials if t[0].accepted]
         rounds.append({"ranking": ranking["per_output"], "tried": [t[0].__dict__ for t in trials]})
         if not passing:
@@ -444,54 +389,11 @@ def _search(model: _Model, before: np.ndarray, candidates: Sequence[str], search
     return model, current, rounds, steps, accepted
 
 
-def _indent(progress: Progress | None) -> Progress | None:
-    return None if progress is None else (lambda line: progress("    " + line))
-
-
 def _fits(fits: Mapping[str, float]) -> str:
     return ", ".join(f"{k} {v:.2f} %" for k, v in fits.items())
 
 
-def fit_nominal(nominal: ModelStructure, free: Sequence[str], train: IdentificationData, *,
-                global_fit: GlobalFitOptions | None = None, **options: Any):
-    """The nominal's output-error fit on the training run, as :func:`diagnose` makes it.
-
-    Without `global_fit`, one
-    :func:`~panto.identification.estimation.least_squares.fit_least_squares` run from the
-    defaults (`options` go to it). With `global_fit`,
-    :func:`~panto.identification.estimation.global_fit.fit_global` with those options (from the
-    defaults, from the data's frequency response where the structure has ``linear_system``, and
-    perturbations; its verdict ends the result's ``message``); ``executor`` and
-    ``max_evaluations`` in `options` override the ones of `global_fit`, ``progress``,
-    ``initial``, ``bounds`` are passed on, the rest go to every least-squares run.
-    Not yet the default of :func:`diagnose`: on ``tests/test_diagnosis_effects.py``'s
-    ``actuator_lag`` case the better nominal absorbs most of the hidden pressure lag and the
-    verdict turns ``unexplained`` (the diagnosis' acceptance must first learn to judge a nominal
-    at its global optimum).
-    """
-    return fit_from_start(nominal, train.select_outputs(_fitted(nominal, train)), free=free,
-                          global_fit=global_fit, **options)
-
-
-def _fitted(structure: ModelStructure, data: IdentificationData) -> tuple[str, ...]:
-    missing = [o for o in data.output_names if o not in structure.output_names]
-    if missing:
-        raise IdentificationError(f"{structure.name} does not simulate {missing} "
-                                  f"(it has {list(structure.output_names)})")
-    return data.output_names
-
-
-def _simulate(model: _Model, data: IdentificationData) -> np.ndarray:
-    y = np.asarray(model.structure.simulate(model.parameters, data), float)
-    return y[:, [model.structure.output_names.index(o) for o in data.output_names]]
-
-
-def _fit(data: IdentificationData, simulated: np.ndarray) -> dict[str, float]:
-    return {o: float(fit_percent(data.outputs[:, j], simulated[:, j]))
-            for j, o in enumerate(data.output_names)}
-
-
-def _analyse(data: IdentificationData, simulated: np.ndarray, model: _Model,
+def _analyse(data: IdentificationData, simulated: np.ndarray, model: Model,
              roles: SignalRoles) -> list[OutputAnalysis]:
     from panto.identification.structures.rigid_body import motion
 
@@ -508,7 +410,7 @@ def _analyse(data: IdentificationData, simulated: np.ndarray, model: _Model,
                              error_model=ErrorModelOptions(*orders))
 
 
-def _gap(model: _Model, data: IdentificationData, simulated: np.ndarray,
+def _gap(model: Model, data: IdentificationData, simulated: np.ndarray,
          roles: SignalRoles) -> dict[str, Any]:
     """The gap's significance on the residual no joint retuning of the model's free parameters
     explains, and whether that retuning agrees with the training estimate
@@ -534,78 +436,7 @@ def _gap(model: _Model, data: IdentificationData, simulated: np.ndarray,
     return {**gap, "transient_s": k * data.sample_period}
 
 
-def _try(model: _Model, candidate: Mapping[str, Any], current: np.ndarray,
-         search: _Search) -> tuple[Trial, _Model, np.ndarray]:
-    """Refit the nominal with one candidate and judge it (`current`: the model's free run on the
-    validation run)."""
-    train, validation, fit_options = search.train, search.validation, search.fit_options
-    effect, say = candidate["effect"], search.say
-    stage = "refit failed"
-    try:
-        structure = AugmentedStructure(model.structure, effect, search.roles,
-                                       candidate["setting"])
-        free = tuple(model.free) + tuple(p for p in structure.effect_parameters
-                                         if p not in model.free)
-        result, new = _refit(structure, model, train, free, fit_options)
-        stage = "the refitted model is invalid on the validation run"
-        try:
-            simulated = _simulate(new, validation)
-        except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError):
-            # the refit from a distorted nominal may end where the model has no equilibrium at
-            # the validation run's operating point: once more from the structure's defaults
-            result, new = _refit(structure, model, train, free, fit_options, from_defaults=True)
-            simulated = _simulate(new, validation)
-        trial = judge_trial(candidate, Refit(structure, result, simulated), model, train,
-                            validation, current, search.options.folds)
-        if not trial["accepted"] and effect in INSIDE:
-            # an effect inside the dynamics (contact loss, friction, a hardening spring) bends
-            # the nominal fitted without it far from its own optimum (a flying head fitted with
-            # a bilateral contact); the refit from there can stop short: once more from the
-            # structure's defaults, the better training cost kept
-            trial, result, new, simulated = _second_start(
-                candidate, structure, model, free, (trial, result, new, simulated), current,
-                search)
-    except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError) as error:
-        say(f"  {effect}: rejected: {stage} ({error})")
-        trial = Trial(effect, candidate["variant"], candidate["err"], effect, {}, {}, math.nan,
-                      math.nan, math.nan, (), math.nan, {}, {}, False, (stage,), str(error))
-        return trial, model, current
-    trial = Trial(**{**trial, "description": describe_augmentation(structure),
-                     **_linear_explains(effect, trial, search.linear_level)})
-    say(f"  {effect}: dBIC {trial.delta_bic:.1f}, |theta|/sigma {trial.significance:.1f}, "
-        f"validation +{trial.improvement:.2f} points (fold spread {trial.fold_spread:.2f}): "
-        + ("accepted" if trial.accepted else "rejected (" + ", ".join(trial.failed) + ")"))
-    return trial, new, simulated
-
-
-def _second_start(candidate: Mapping[str, Any], structure: AugmentedStructure, model: _Model,
-                  free: tuple[str, ...], first: tuple, current: np.ndarray, search: _Search
-                  ) -> tuple:
-    """`first` = (trial, result, model, simulated) or the refit from the structure's defaults,
-    whichever reaches the lower training cost (a failure of the second start keeps the first)."""
-    train, validation = search.train, search.validation
-    try:
-        result, new = _refit(structure, model, train, free, search.fit_options,
-                             from_defaults=True)
-        simulated = _simulate(new, validation)
-    except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError):
-        return first
-    if not result.details.get("cost", math.inf) < first[1].details.get("cost", math.inf):
-        return first
-    trial = judge_trial(candidate, Refit(structure, result, simulated), model, train, validation,
-                        current, search.options.folds)
-    return trial, result, new, simulated
-
-
-def _adequacy_quietly(nominal: ModelStructure, result: Any, train: IdentificationData) -> Any:
-    """:func:`check_adequacy` of the nominal's fit, or None where no black box can be fitted."""
-    try:
-        return check_adequacy(nominal, result, train.select_outputs(_fitted(nominal, train)))
-    except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError):
-        return None
-
-
-def _discovery(model: _Model, train: IdentificationData, validation: IdentificationData,
+def _discovery(model: Model, train: IdentificationData, validation: IdentificationData,
                executor: Any, progress: Progress | None, adequacy: Any = None
                ) -> dict[str, Any] | None:
     """The discovery library's best term in the model (:attr:`DiagnosisOptions.discovery`); not
@@ -624,7 +455,7 @@ def _discovery(model: _Model, train: IdentificationData, validation: Identificat
         progress("diagnose: unexplained: searching the discovery library for a term")
     try:
         hypothesis = discover(model.structure, model.parameters, model.free, train, validation,
-                              executor=executor, progress=_indent(progress))
+                              executor=executor, progress=indented(progress))
     except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError) as error:
         if progress:
             progress(f"diagnose: discovery failed ({error})")
@@ -647,53 +478,6 @@ def _hypothesis_text(report: Mapping[str, Any]) -> str:
     return f"{report.get('term', '?')} on {report.get('output', '?')}{fits}{share}"
 
 
-def _black_box_validation(adequacy: Any, validation: IdentificationData
-                          ) -> dict[str, float] | None:
-    """The adequacy black box's free-run fit [%] on the validation run, per output it was fitted
-    to; None without a black box (or where it cannot run on the validation run)."""
-    box = getattr(adequacy, "black_box", None)
-    if box is None or box.simulator is None:
-        return None
-    try:
-        data = validation.select_outputs(tuple(adequacy.black_box_fit))
-        return _fit(data, np.asarray(box.simulator(data), float))
-    except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError):
-        return None
-
-
-def _linear_explains(effect: str, trial: Mapping[str, Any],
-                     level: Mapping[str, float] | None) -> dict[str, Any]:
-    """The trial's verdict fields, failed when a nonlinear effect does not validate better than the
-    adequacy's linear black box (of the nominal's order and two more states) on any output by the
-    relevance floor (:attr:`DiagnosisOptions.adequacy`): on the withheld run, since the black box
-    has more parameters than the refitted structure, a training comparison favours it."""
-    if level is None or effect not in NONLINEAR_EFFECTS:
-        return {}
-    gains = {o: trial["fit_validation"].get(o, math.nan) - level[o] for o in level}
-    if any(g > IMPROVEMENT_FLOOR for g in gains.values()):
-        return {}
-    reason = ("a linear black box validates as well (" +
-              ", ".join(f"{o} {g:+.2f} points" for o, g in gains.items()) +
-              "): not named for a linear difference")
-    return {"accepted": False, "failed": tuple(trial["failed"]) + (reason,)}
-
-
-def _adequate_nominal(nominal: ModelStructure, free: Sequence[str], train: IdentificationData,
-                      result: Any, options: DiagnosisOptions, fit_options: Mapping[str, Any],
-                      progress: Progress | None) -> tuple[Any, Any]:
-    """The nominal's fit and its adequacy; refitted globally when a black box shows that a single
-    start did not converge (:attr:`DiagnosisOptions.adequacy`)."""
-    data = train.select_outputs(_fitted(nominal, train))
-    adequacy = check_adequacy(nominal, result, data, progress=_indent(progress))
-    if adequacy.verdict != "not converged":
-        return result, adequacy
-    if progress:
-        progress("diagnose: adequacy: " + adequacy.message + "; refitting the nominal globally")
-    result = fit_nominal(nominal, free, train, progress=_indent(progress),
-                         global_fit=options.global_fit or GlobalFitOptions(), **fit_options)
-    return result, check_adequacy(nominal, result, data, reference=adequacy)
-
-
 def _predicted_contact_loss(top: Sequence[Mapping[str, Any]], remaining: Sequence[str],
                             roles: SignalRoles, validation: IdentificationData,
                             current: np.ndarray) -> list[dict[str, Any]]:
@@ -712,57 +496,8 @@ def _predicted_contact_loss(top: Sequence[Mapping[str, Any]], remaining: Sequenc
              "setting": {"output": force}}]
 
 
-def _refit(structure: AugmentedStructure, model: _Model, train: IdentificationData,
-           free: tuple[str, ...], fit_options: Mapping[str, Any], from_defaults: bool = False
-           ) -> tuple[Any, _Model]:
-    """The result and the refitted model of an output-error refit from the current parameters
-    (`from_defaults`: the structure's default ones) and the effect's start values; when the start
-    is invalid (an unstable feedback), from the effect scaled towards its neutral value."""
-    starts, bounds = structure.nominal(), structure.bounds()
-    initial = {k: v for k, v in (starts if from_defaults else model.parameters).items()
-               if k in structure.parameter_names and k not in structure.effect_parameters}
-    initial = {k: float(min(max(v, bounds[k][0]), bounds[k][1])) if k in bounds else v
-               for k, v in initial.items()}
-    neutral = [p for p in structure.effect_parameters if bounds[p][0] <= 0.0 <= bounds[p][1]]
-    own = tuple(p for p in structure.effect_parameters if p in free)
-    result = None
-    for factor in (1.0, 0.1, 0.0):
-        start = {**initial, **{p: starts[p] for p in structure.effect_parameters},
-                 **{p: starts[p] * factor for p in neutral}}
-        start = {k: float(min(max(v, bounds[k][0]), bounds[k][1])) if k in bounds else v
-                 for k, v in start.items()}
-        if own and factor == 1.0 and not from_defaults:
-            # staged: the effect's own parameters first, the nominal held where it is (a few
-            # well-conditioned unknowns), then everything from there; a joint start from a
-            # nominal in a valley otherwise lets the valley's directions take the steps
-            staged = fit_least_squares(structure, train, free=own, initial=start, **fit_options)
-            if not staged.message.startswith("model invalid"):
-                start = {**start, **{p: float(staged.parameters[p]) for p in own}}
-        result = fit_least_squares(structure, train, free=free, initial=start, **fit_options)
-        if not result.message.startswith("model invalid"):
-            break
-    else:
-        raise IdentificationError(f"{structure.name}: {result.message}")
-    if factor != 0.0 and neutral and not from_defaults and _below(result.fit, model.fit_train):
-        # the effect's ranked start led the refit below the model it extends (which the
-        # effect's neutral values reproduce): a local minimum; once more from the neutral values
-        again = fit_least_squares(structure, train, free=free,
-                                  initial={**initial, **{p: 0.0 for p in neutral}}, **fit_options)
-        if again.details.get("cost", math.inf) < result.details.get("cost", math.inf):
-            result = again
-    return result, _Model(structure, dict(result.parameters), free, dict(result.std),
-                          np.asarray(result.covariance, float), dict(result.fit))
-
-
-def _below(fit: Mapping[str, float], reference: Mapping[str, float]) -> bool:
-    """Whether the training fit `fit` [%] is on average below `reference` (a refit that ends
-    worse than the model it extends did not find the optimum)."""
-    common = [o for o in reference if o in fit]
-    return bool(common) and float(np.mean([fit[o] - reference[o] for o in common])) < 0.0
-
-
-def _choose(passing: Sequence[tuple[Trial, _Model, np.ndarray]], folds: int
-            ) -> tuple[Trial, _Model, np.ndarray]:
+def _choose(passing: Sequence[tuple[Trial, Model, np.ndarray]], folds: int
+            ) -> tuple[Trial, Model, np.ndarray]:
     """The accepted candidate among those passing: the largest validation improvement, unless
     others come within its standard error over the blocked folds (``spread / sqrt(folds)``);
     the withheld data cannot tell those apart, so the training ``dBIC`` (which charges ``ln N_eff``
@@ -779,7 +514,7 @@ def _choose(passing: Sequence[tuple[Trial, _Model, np.ndarray]], folds: int
 def _step(trial: Trial, data: IdentificationData, before: np.ndarray, after: np.ndarray) -> Step:
     from panto.identification.diagnosis.residual_energy import energy_by_band, energy_by_segment
 
-    fit_before, fit_after = _fit(data, before), _fit(data, after)
+    fit_before, fit_after = fit_per_output(data, before), fit_per_output(data, after)
     removed, bands, segments = {}, {}, {}
     for j, o in enumerate(data.output_names):
         y = data.outputs[:, j]

@@ -1,0 +1,212 @@
+"""One candidate effect refitted into the current model and judged (step 3 of
+:func:`~panto.identification.diagnosis.pipeline.diagnose`; the tests are in the pipeline's notes).
+
+:func:`try_candidate` builds the :class:`~panto.identification.diagnosis.augmentations.
+AugmentedStructure`, refits it on the training run (:func:`refit`: the effect's own parameters
+first with the nominal held, then everything; once more from the effect's neutral values when the
+ranked start ends below the model it extends; for an effect inside the dynamics once more from the
+structure's defaults, the lower training cost kept), simulates it on the validation run and judges
+it (:func:`~panto.identification.diagnosis.support.judge_trial`; a nonlinear effect must also
+validate better than the adequacy's linear black box, :func:`linear_explains`). The round's trials
+run in parallel through :mod:`~panto.identification.diagnosis.parallel`.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+import numpy as np
+
+from panto.identification.diagnosis.augmentations import (INSIDE, AugmentedStructure,
+                                                          describe_augmentation)
+from panto.identification.diagnosis.effects import NONLINEAR_EFFECTS, SignalRoles
+from panto.identification.diagnosis.nominal import Progress, simulate
+from panto.identification.diagnosis.support import IMPROVEMENT_FLOOR, Refit, judge_trial
+from panto.identification.estimation.base import (IdentificationData, IdentificationError,
+                                                  ModelStructure)
+from panto.identification.estimation.least_squares import fit_least_squares
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One candidate refitted in one round and how it was judged."""
+
+    effect: str
+    variant: str
+    err: float
+    description: str
+    parameters: Mapping[str, float]
+    std: Mapping[str, float]
+    significance: float
+    delta_bic: float
+    improvement: float
+    fold_improvements: tuple[float, ...]
+    fold_spread: float
+    fit_train: Mapping[str, float]
+    fit_validation: Mapping[str, float]
+    accepted: bool = False
+    failed: tuple[str, ...] = ()
+    message: str = ""
+
+
+@dataclass
+class Model:
+    """The current model of the search: structure, parameters, free parameters."""
+
+    structure: ModelStructure
+    parameters: dict[str, float]
+    free: tuple[str, ...]
+    std: dict[str, float] = field(default_factory=dict)
+    covariance: np.ndarray | None = None
+    fit_train: dict[str, float] = field(default_factory=dict)
+    """Training fit [%] per output (empty: unknown)."""
+
+
+@dataclass(frozen=True, eq=False)
+class Search:
+    """What every round of the search shares: the runs, the signal roles, the options, the
+    refits' least-squares options and the progress sink."""
+
+    train: IdentificationData
+    validation: IdentificationData
+    roles: SignalRoles
+    options: Any
+    """The :class:`~panto.identification.diagnosis.pipeline.DiagnosisOptions`."""
+    fit_options: Mapping[str, Any]
+    say: Progress
+    linear_level: Mapping[str, float] | None = None
+    """Validation fit [%] per output of the adequacy's black box (:attr:`DiagnosisOptions.
+    adequacy`), or None."""
+
+
+def try_candidate(model: Model, candidate: Mapping[str, Any], current: np.ndarray,
+         search: Search) -> tuple[Trial, Model, np.ndarray]:
+    """Refit the nominal with one candidate and judge it (`current`: the model's free run on the
+    validation run)."""
+    train, validation, fit_options = search.train, search.validation, search.fit_options
+    effect, say = candidate["effect"], search.say
+    stage = "refit failed"
+    try:
+        structure = AugmentedStructure(model.structure, effect, search.roles,
+                                       candidate["setting"])
+        free = tuple(model.free) + tuple(p for p in structure.effect_parameters
+                                         if p not in model.free)
+        result, new = refit(structure, model, train, free, fit_options)
+        stage = "the refitted model is invalid on the validation run"
+        try:
+            simulated = simulate(new, validation)
+        except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError):
+            # the refit from a distorted nominal may end where the model has no equilibrium at
+            # the validation run's operating point: once more from the structure's defaults
+            result, new = refit(structure, model, train, free, fit_options, from_defaults=True)
+            simulated = simulate(new, validation)
+        trial = judge_trial(candidate, Refit(structure, result, simulated), model, train,
+                            validation, current, search.options.folds)
+        if not trial["accepted"] and effect in INSIDE:
+            # an effect inside the dynamics (contact loss, friction, a hardening spring) bends
+            # the nominal fitted without it far from its own optimum (a flying head fitted with
+            # a bilateral contact); the refit from there can stop short: once more from the
+            # structure's defaults, the better training cost kept
+            trial, result, new, simulated = _second_start(
+                candidate, structure, model, free, (trial, result, new, simulated), current,
+                search)
+    except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError) as error:
+        say(f"  {effect}: rejected: {stage} ({error})")
+        trial = Trial(effect, candidate["variant"], candidate["err"], effect, {}, {}, math.nan,
+                      math.nan, math.nan, (), math.nan, {}, {}, False, (stage,), str(error))
+        return trial, model, current
+    trial = Trial(**{**trial, "description": describe_augmentation(structure),
+                     **linear_explains(effect, trial, search.linear_level)})
+    say(f"  {effect}: dBIC {trial.delta_bic:.1f}, |theta|/sigma {trial.significance:.1f}, "
+        f"validation +{trial.improvement:.2f} points (fold spread {trial.fold_spread:.2f}): "
+        + ("accepted" if trial.accepted else "rejected (" + ", ".join(trial.failed) + ")"))
+    return trial, new, simulated
+
+
+def _second_start(candidate: Mapping[str, Any], structure: AugmentedStructure, model: Model,
+                  free: tuple[str, ...], first: tuple, current: np.ndarray, search: Search
+                  ) -> tuple:
+    """`first` = (trial, result, model, simulated) or the refit from the structure's defaults,
+    whichever reaches the lower training cost (a failure of the second start keeps the first)."""
+    train, validation = search.train, search.validation
+    try:
+        result, new = refit(structure, model, train, free, search.fit_options,
+                             from_defaults=True)
+        simulated = simulate(new, validation)
+    except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError):
+        return first
+    if not result.details.get("cost", math.inf) < first[1].details.get("cost", math.inf):
+        return first
+    trial = judge_trial(candidate, Refit(structure, result, simulated), model, train, validation,
+                        current, search.options.folds)
+    return trial, result, new, simulated
+
+
+def refit(structure: AugmentedStructure, model: Model, train: IdentificationData,
+           free: tuple[str, ...], fit_options: Mapping[str, Any], from_defaults: bool = False
+           ) -> tuple[Any, Model]:
+    """The result and the refitted model of an output-error refit from the current parameters
+    (`from_defaults`: the structure's default ones) and the effect's start values; when the start
+    is invalid (an unstable feedback), from the effect scaled towards its neutral value."""
+    starts, bounds = structure.nominal(), structure.bounds()
+    initial = {k: v for k, v in (starts if from_defaults else model.parameters).items()
+               if k in structure.parameter_names and k not in structure.effect_parameters}
+    initial = {k: float(min(max(v, bounds[k][0]), bounds[k][1])) if k in bounds else v
+               for k, v in initial.items()}
+    neutral = [p for p in structure.effect_parameters if bounds[p][0] <= 0.0 <= bounds[p][1]]
+    own = tuple(p for p in structure.effect_parameters if p in free)
+    result = None
+    for factor in (1.0, 0.1, 0.0):
+        start = {**initial, **{p: starts[p] for p in structure.effect_parameters},
+                 **{p: starts[p] * factor for p in neutral}}
+        start = {k: float(min(max(v, bounds[k][0]), bounds[k][1])) if k in bounds else v
+                 for k, v in start.items()}
+        if own and factor == 1.0 and not from_defaults:
+            # staged: the effect's own parameters first, the nominal held where it is (a few
+            # well-conditioned unknowns), then everything from there; a joint start from a
+            # nominal in a valley otherwise lets the valley's directions take the steps
+            staged = fit_least_squares(structure, train, free=own, initial=start, **fit_options)
+            if not staged.message.startswith("model invalid"):
+                start = {**start, **{p: float(staged.parameters[p]) for p in own}}
+        result = fit_least_squares(structure, train, free=free, initial=start, **fit_options)
+        if not result.message.startswith("model invalid"):
+            break
+    else:
+        raise IdentificationError(f"{structure.name}: {result.message}")
+    if factor != 0.0 and neutral and not from_defaults and _below(result.fit, model.fit_train):
+        # the effect's ranked start led the refit below the model it extends (which the
+        # effect's neutral values reproduce): a local minimum; once more from the neutral values
+        again = fit_least_squares(structure, train, free=free,
+                                  initial={**initial, **{p: 0.0 for p in neutral}}, **fit_options)
+        if again.details.get("cost", math.inf) < result.details.get("cost", math.inf):
+            result = again
+    return result, Model(structure, dict(result.parameters), free, dict(result.std),
+                          np.asarray(result.covariance, float), dict(result.fit))
+
+
+def _below(fit: Mapping[str, float], reference: Mapping[str, float]) -> bool:
+    """Whether the training fit `fit` [%] is on average below `reference` (a refit that ends
+    worse than the model it extends did not find the optimum)."""
+    common = [o for o in reference if o in fit]
+    return bool(common) and float(np.mean([fit[o] - reference[o] for o in common])) < 0.0
+
+
+def linear_explains(effect: str, trial: Mapping[str, Any],
+                     level: Mapping[str, float] | None) -> dict[str, Any]:
+    """The trial's verdict fields, failed when a nonlinear effect does not validate better than the
+    adequacy's linear black box (of the nominal's order and two more states) on any output by the
+    relevance floor (:attr:`DiagnosisOptions.adequacy`): on the withheld run, since the black box
+    has more parameters than the refitted structure, a training comparison favours it."""
+    if level is None or effect not in NONLINEAR_EFFECTS:
+        return {}
+    gains = {o: trial["fit_validation"].get(o, math.nan) - level[o] for o in level}
+    if any(g > IMPROVEMENT_FLOOR for g in gains.values()):
+        return {}
+    reason = ("a linear black box validates as well (" +
+              ", ".join(f"{o} {g:+.2f} points" for o, g in gains.items()) +
+              "): not named for a linear difference")
+    return {"accepted": False, "failed": tuple(trial["failed"]) + (reason,)}
+
+
+__all__ = ["Trial", "Model", "Search", "try_candidate", "refit", "linear_explains"]
