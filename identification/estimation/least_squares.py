@@ -29,7 +29,10 @@ Algorithm
 Jacobian
     Forward differences in ``z`` (step ``step``, default the structure's ``difference_step`` or
     1e-6), the columns evaluated in parallel through an executor when one is given. A column whose
-    forward point is invalid is taken backwards.
+    forward point is invalid is taken backwards. Optionally (``broyden``, for structures whose run
+    is expensive) a Jacobian is reused for a few iterations with Broyden's rank-1 secant updates
+    and computed afresh after failed steps and before the run may stop; the damping trials of a
+    step then go in pairs to the executor (:func:`_run`, :func:`_step`).
 
 Uncertainty and identifiability
     :mod:`panto.identification.estimation.uncertainty`: the sandwich covariance from the Jacobian with the
@@ -63,6 +66,10 @@ from panto.identification.estimation.uncertainty import (ParameterEstimate, desc
 Progress = Callable[[str], None]
 #: z-value of the two-sided 95 % normal interval.
 Z95 = 1.959963984540054
+
+
+#: Damping trials of a step on a Broyden-updated Jacobian before it is computed afresh.
+_UPDATED_TRIALS = 4
 
 
 class _Budget(Exception):
@@ -207,8 +214,15 @@ def fits_from_residuals(problem: Problem, r: np.ndarray) -> dict[str, float]:
 
 def _run(problem: Problem, z0: np.ndarray, lower: np.ndarray, upper: np.ndarray, *,
          step: float, executor: Any, progress: Progress | None, budget: int,
-         tolerance: float) -> dict[str, Any]:
-    """One bounded Levenberg-Marquardt run from `z0` (module notes); a plain summary."""
+         tolerance: float, broyden: int = 0) -> dict[str, Any]:
+    """One bounded Levenberg-Marquardt run from `z0` (module notes); a plain summary.
+
+    With ``broyden = k > 0`` the finite-difference Jacobian is reused for up to `k` further
+    iterations with Broyden's rank-1 update ``J += (dr - J dz) dz^T / (dz^T dz)`` after each
+    accepted step; it is computed afresh when a step with an updated Jacobian fails to lower
+    the cost in :data:`_UPDATED_TRIALS` trials (the damping then goes back to its value before
+    them) or declares convergence (only a fresh Jacobian may stop the run).
+    """
     counter = _Counter(problem, budget, progress)
     counter.charge(1)
     r = evaluate_points(problem, [z0])[0]
@@ -216,15 +230,28 @@ def _run(problem: Problem, z0: np.ndarray, lower: np.ndarray, upper: np.ndarray,
         return {"z": z0, "status": "invalid", "message": f"model invalid at the start point: {r}",
                 "evaluations": counter.count, "iterations": 0}
     z, damping = np.clip(np.asarray(z0, float), lower, upper), 1e-3
+    jac, age = None, 0
     try:
         while True:
             counter.report(r)
-            jac = _jacobian(problem, z, r, step, upper, executor, counter)
+            if broyden == 0 or jac is None or age > broyden:
+                jac, age = _jacobian(problem, z, r, step, upper, executor, counter), 0
+            before = damping
             z_new, r_new, damping, reason = _step(problem, z, r, jac, lower, upper, damping,
-                                                  tolerance, counter)
-            if reason:
+                                                  tolerance, counter,
+                                                  trials=_UPDATED_TRIALS if age > 0 else None,
+                                                  pairs=executor if broyden > 0 else None)
+            if age > 0 and (reason or z_new is z):  # decided on an updated Jacobian: refresh
+                jac = None
+                if z_new is z:  # its failed trials say nothing about the damping
+                    damping = before
+                    continue
+            elif reason:
                 return {"z": z_new, "status": "converged", "message": f"converged: {reason}",
                         "evaluations": counter.count, "iterations": counter.iterations}
+            if broyden > 0 and jac is not None:
+                dz, dr = z_new - z, r_new - r
+                jac, age = jac + np.outer(dr - jac @ dz, dz / float(dz @ dz)), age + 1
             z, r = z_new, r_new
     except _Budget:
         return {"z": z, "status": "budget", "message": "not converged: maximum of "
@@ -233,13 +260,17 @@ def _run(problem: Problem, z0: np.ndarray, lower: np.ndarray, upper: np.ndarray,
 
 
 def _step(problem: Problem, z: np.ndarray, r: np.ndarray, jac: np.ndarray, lower: np.ndarray,
-          upper: np.ndarray, damping: float, tolerance: float, counter: _Counter
+          upper: np.ndarray, damping: float, tolerance: float, counter: _Counter,
+          trials: int | None = None, pairs: Any = None
           ) -> tuple[np.ndarray, np.ndarray, float, str]:
     """Marquardt's step (thesis eq. 4.14), retried with more damping until the cost falls.
 
     ``(J^T J + lambda diag(J^T J)) h = -J^T r`` on the parameters not held at a bound by the
     gradient; the step is clipped into the bounds. Returns the new point, its residuals, the
-    damping for the next iteration and, when converged, the reason (else "").
+    damping for the next iteration and, when converged, the reason (else ""). After `trials`
+    failed trials (if given) it returns `z` itself (the same object), no reason and the raised
+    damping. With an executor `pairs` each trial is evaluated together with the next one (4 times
+    the damping) on it, which the next trial then takes: the same steps, the wall time of one.
     """
     cost = 0.5 * float(r @ r)
     hessian, gradient = jac.T @ jac, jac.T @ r
@@ -250,16 +281,35 @@ def _step(problem: Problem, z: np.ndarray, r: np.ndarray, jac: np.ndarray, lower
         return z, r, damping, "the gradient vanishes (first-order optimality)"
     h_ff = hessian[np.ix_(moving, moving)]
     scaling = np.maximum(np.diag(h_ff), 1e-12 * np.max(np.diag(h_ff)))
-    while damping < 1e12:
+
+    def trial(damping: float) -> np.ndarray:
         step = np.zeros_like(z)
+        step[moving] = np.linalg.solve(h_ff + damping * np.diag(scaling), -gradient[moving])
+        return np.clip(z + step, lower, upper)
+
+    spare: dict[float, Any] = {}
+    while damping < 1e12:
         try:
-            step[moving] = np.linalg.solve(h_ff + damping * np.diag(scaling), -gradient[moving])
+            z_new = trial(damping)
         except np.linalg.LinAlgError:
             damping *= 10.0
             continue
-        z_new = np.clip(z + step, lower, upper)
-        counter.charge(1)
-        r_new = evaluate_points(problem, [z_new])[0]
+        if damping in spare:
+            r_new = spare.pop(damping)
+        elif pairs is not None:
+            try:
+                z_next = trial(damping * 4.0)
+            except np.linalg.LinAlgError:
+                z_next = None
+            points = [z_new] if z_next is None else [z_new, z_next]
+            counter.charge(len(points))
+            results = _map(pairs, problem, points)
+            r_new = results[0]
+            if z_next is not None:
+                spare[damping * 4.0] = results[1]
+        else:
+            counter.charge(1)
+            r_new = evaluate_points(problem, [z_new])[0]
         if not isinstance(r_new, str):
             new_cost = 0.5 * float(r_new @ r_new)
             counter.record(z_new, r_new)
@@ -270,6 +320,9 @@ def _step(problem: Problem, z: np.ndarray, r: np.ndarray, jac: np.ndarray, lower
                           "the step is below the tolerance" if small else "")
                 return z_new, r_new, max(damping / 3.0, 1e-12), reason
         damping *= 4.0
+        trials = None if trials is None else trials - 1
+        if trials == 0:
+            return z, r, damping, ""
     return z, r, damping, "no step decreases the cost (local minimum within the bounds)"
 
 
@@ -368,7 +421,7 @@ def fit_least_squares(structure: ModelStructure, data: IdentificationData, *,
                       executor: Any = None, progress: Progress | None = None,
                       max_evaluations: int = 2000, multistart: int = 0,
                       rng: np.random.Generator | None = None, step: float | None = None,
-                      tolerance: float = 1e-6,
+                      tolerance: float = 1e-6, broyden: int | None = None,
                       identifiability_threshold: float = 0.5,
                       fix_unidentifiable: bool = False) -> IdentificationResult:
     """Fit `free` parameters of `structure` to `data` by bounded Levenberg-Marquardt (module notes).
@@ -400,6 +453,10 @@ def fit_least_squares(structure: ModelStructure, data: IdentificationData, *,
     tolerance : float
         Stop when a step lowers the cost by less than this fraction (or the step or the
         gradient is that small).
+    broyden : int, optional
+        Reuse each finite-difference Jacobian for up to this many further iterations with
+        Broyden rank-1 updates (:func:`_run`; default the structure's ``broyden_updates``, else
+        0: a fresh Jacobian every iteration).
     identifiability_threshold : float
         Relative standard deviation above which a parameter (or direction) is not identifiable.
     fix_unidentifiable : bool
@@ -424,7 +481,9 @@ def fit_least_squares(structure: ModelStructure, data: IdentificationData, *,
     started = time.perf_counter()
     problem, z0, lower, upper = make_problem(structure, data, free, initial, bounds)
     step = float(step if step is not None else getattr(structure, "difference_step", 1e-6))
-    options = {"step": step, "budget": int(max_evaluations), "tolerance": float(tolerance)}
+    broyden = int(broyden if broyden is not None else getattr(structure, "broyden_updates", 0))
+    options = {"step": step, "budget": int(max_evaluations), "tolerance": float(tolerance),
+               "broyden": broyden}
     starts = [z0]
     if multistart > 0:
         rng = rng if rng is not None else np.random.default_rng()
