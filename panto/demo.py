@@ -82,8 +82,11 @@ class DemoSettings:
     cosim_reference : bool
         Also run the EN 50318 reference pantograph (the line model's check).
     workers : int
-        Processes for the two rig runs and their two videos, which are independent: 2 runs
-        them side by side, 1 one after the other in this process (same results).
+        Processes for the independent parts, all with the same results as 1 (everything one
+        after the other in this process): the FMUs are built in that many parts side by side,
+        the two rig runs run side by side, and the video step (both runs, one after the other)
+        runs in a worker process beside the identification and the diagnosis, whose fits
+        leave a core free for most of their time (:class:`Step`).
     """
 
     run_duration: float | None = None
@@ -125,12 +128,19 @@ class DemoSettings:
 
 @dataclass(frozen=True)
 class Step:
-    """One step of the demo: its name, title, function and what it needs from earlier steps."""
+    """One step of the demo: its name, title, function and what it needs from earlier steps.
+
+    A step with `gives` (the state keys it adds) runs beside the following steps in a worker
+    process when ``settings.workers`` > 1, with ``workers=1`` inside (its own parts one after
+    the other): its lines follow when it ends, before the first step that needs what it gives,
+    at the latest at the end. It must not need the state the following steps add.
+    """
 
     name: str
     title: str
     function: Callable[..., dict]
     needs: tuple[str, ...] = ()
+    gives: tuple[str, ...] = ()
 
 
 def _steps() -> tuple[Step, ...]:
@@ -141,7 +151,7 @@ def _steps() -> tuple[Step, ...]:
         Step("fmus", "build and validate the FMUs", steps.build_fmus),
         Step("rig", "rig campaign on the virtual test bed", steps.run_rig_campaign, ("fmus",)),
         Step("video", "camera video: render, track, synchronise, merge", steps.film_runs,
-             ("runs",)),
+             ("runs",), gives=("merged",)),
         Step("identification", "identify the physical model and compare the structures",
              analysis.identify_models, ("runs",)),
         Step("diagnosis", "diagnose the physical model's gap on the validation run",
@@ -184,15 +194,80 @@ def run_demo(out: Path, *, quick: bool = False, progress: Progress = print,
     state: dict[str, Any] = {"out": out, "settings": settings}
     summary: dict[str, Any] = {"quick": quick, "settings": asdict(settings), "steps": []}
     steps = _steps()
+    beside: dict[str, Beside] = {}
     for number, step in enumerate(steps, 1):
         label = f"[{number}/{len(steps)}] {step.title}"
-        record = _run_step(step, state, label, progress)
-        summary["steps"].append(record)
-        if record["status"] == "ok":
-            summary[step.name] = record.pop("result")
+        for name in [n for n, job in beside.items() if set(job.step.gives) & set(step.needs)]:
+            _join(beside.pop(name), state, summary, progress)
+        if step.gives and settings.workers > 1 and all(key in state for key in step.needs):
+            beside[step.name] = _start_beside(step, state, label, progress)
+            summary["steps"].append({"name": step.name})  # filled in when it ends
+            continue
+        _record(summary, _run_step(step, state, label, progress))
+    for job in beside.values():
+        _join(job, state, summary, progress)
     summary["wall_time_s"] = time.perf_counter() - started
     summary["failed_steps"] = [s["name"] for s in summary["steps"] if s["status"] != "ok"]
     return _finish(out, summary, progress)
+
+
+def _record(summary: dict[str, Any], record: dict) -> None:
+    """Put a step's record in its place in ``summary["steps"]`` and its result beside it."""
+    places = [i for i, s in enumerate(summary["steps"]) if s == {"name": record["name"]}]
+    if places:
+        summary["steps"][places[0]] = record
+    else:
+        summary["steps"].append(record)
+    if record["status"] == "ok":
+        summary[record["name"]] = record.pop("result")
+
+
+@dataclass(frozen=True)
+class Beside:
+    """A step running in a worker process (:func:`_start_beside`)."""
+
+    step: Step
+    pool: Any
+    future: Any
+
+
+def _start_beside(step: Step, state: dict[str, Any], label: str, progress: Progress) -> Beside:
+    """Start `step` in a worker process on a copy of `state` (its parts one after the other)."""
+    from concurrent.futures import ProcessPoolExecutor
+    from dataclasses import replace
+
+    progress(f"{label}: beside the next steps in a worker process (its lines follow when it "
+             "ends)")
+    copy = {**state, "settings": replace(state["settings"], workers=1)}
+    pool = ProcessPoolExecutor(max_workers=1)
+    return Beside(step, pool, pool.submit(_step_in_worker, step, copy, label))
+
+
+def _step_in_worker(step: Step, state: dict[str, Any], label: str
+                    ) -> tuple[dict, dict[str, Any], list[str]]:
+    """Run `step` here: its record, the state it gave and its progress lines."""
+    lines: list[str] = []
+    record = _run_step(step, state, label, lines.append)
+    return record, {key: state[key] for key in step.gives if key in state}, lines
+
+
+def _join(job: Beside, state: dict[str, Any], summary: dict[str, Any],
+          progress: Progress) -> None:
+    """Wait for a step started by :func:`_start_beside`; print its lines, record it."""
+    try:
+        record, given, lines = job.future.result()
+    except Exception as error:  # noqa: BLE001 - the worker itself died: recorded like a failure
+        message = f"{type(error).__name__}: {error}"
+        record, given, lines = ({"name": job.step.name, "title": job.step.title,
+                                 "status": "failed", "seconds": 0.0, "message": message,
+                                 "traceback": traceback.format_exc(limit=6)}, {},
+                                [f"[{job.step.name}] FAILED: {message}"])
+    finally:
+        job.pool.shutdown()
+    for line in lines:
+        progress(line)
+    state.update(given)
+    _record(summary, record)
 
 
 def _run_step(step: Step, state: dict[str, Any], label: str, progress: Progress) -> dict:

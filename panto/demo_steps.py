@@ -27,13 +27,21 @@ def fit_percent(measured: np.ndarray, simulated: np.ndarray) -> float:
 
 
 def build_fmus(state: dict[str, Any], progress: Progress) -> dict:
-    """Step 1: generate, compile, package and validate the FMUs into ``out/fmus``."""
-    from panto.build_fmu.project import build_project_fmus
+    """Step 1: generate, compile, package and validate the FMUs into ``out/fmus``.
+
+    Each FMU is compiled on its own (one C compiler process at a time), so the list is cut in
+    ``settings.workers`` consecutive parts built side by side (:func:`_side_by_side`): the same
+    files, and the progress lines in the same order.
+    """
+    from panto.fmu_src.models import FMU_NAMES
 
     out, settings = state["out"], state["settings"]
-    kwargs = {"names": settings.fmu_names} if settings.fmu_names else {}
-    built = build_project_fmus(out / "fmus", fmi_versions=settings.fmi_versions,
-                               progress=progress, **kwargs)
+    names = tuple(settings.fmu_names or FMU_NAMES)
+    size = -(-len(names) // max(1, settings.workers))
+    jobs = [(out / "fmus", names[i:i + size], settings.fmi_versions)
+            for i in range(0, len(names), size)]
+    built = [b for part in _side_by_side(_build_part, jobs, settings.workers, progress)
+             for b in part]
     fmus = [{"file": b.path.name, "fmi_version": b.fmi_version, "valid": not b.problems,
              "problems": list(b.problems)} for b in built]
     invalid = [f["file"] for f in fmus if not f["valid"]]
@@ -41,6 +49,15 @@ def build_fmus(state: dict[str, Any], progress: Progress) -> dict:
         raise RuntimeError(f"fmpy's validator rejected {invalid}")
     state["fmus"] = out / "fmus"
     return {"fmus": fmus, "all_valid": True, "count": len(fmus)}
+
+
+def _build_part(folder: Path, names: tuple[str, ...], fmi_versions: tuple[int, ...],
+                progress: Progress) -> list:
+    """Build the FMUs `names` into `folder` (one part of :func:`build_fmus`)."""
+    from panto.build_fmu.project import build_project_fmus
+
+    return build_project_fmus(folder, names=names, fmi_versions=fmi_versions,
+                              progress=progress)
 
 
 def run_rig_campaign(state: dict[str, Any], progress: Progress) -> dict:
@@ -175,7 +192,9 @@ def film_runs(state: dict[str, Any], progress: Progress) -> dict:
     """Step 2b: film, track, synchronise and merge a window of each run (camera at reduced
     resolution: a 1080p frame costs ~37 s of rendering per 20 s of video on this machine).
 
-    The runs are filmed side by side like :func:`run_rig_campaign` runs them.
+    The runs are filmed side by side like :func:`run_rig_campaign` runs them when
+    ``settings.workers`` > 1; :func:`panto.demo.run_demo` runs this step itself in a worker
+    process beside the identification, with ``workers=1`` (one run after the other).
     """
     out, settings = state["out"], state["settings"]
     jobs = [(label, folder, out / "video", settings) for label, folder in state["runs"].items()]
