@@ -84,6 +84,27 @@ def _as_lists(expression):
     return expression
 
 
+def _cse_nested(expression):
+    """``sympy.cse`` over every leaf of nested lists, keeping the nesting (lambdify's callable
+    ``cse``). ``cse=True`` leaves nested lists (our matrices) without any elimination: the
+    pantograph's forces then repeat ``sin(phi2 + phi3)`` 1688 times."""
+    leaves = []
+
+    def collect(item):
+        if isinstance(item, list):
+            return [collect(element) for element in item]
+        leaves.append(sp.sympify(item))
+        return len(leaves) - 1
+
+    shape = collect(expression)
+    replacements, reduced = sp.cse(leaves)
+
+    def rebuild(item):
+        return [rebuild(element) for element in item] if isinstance(item, list) else reduced[item]
+
+    return replacements, rebuild(shape)
+
+
 # --- cache of the compiled functions ----------------------------------------------------------
 
 #: Bumped when the layout of a cache file changes.
@@ -242,7 +263,7 @@ class NumericModel:
     def _compile(self, expression) -> callable:
         deps = [d.symbol for d in self.model.dependents]
         args = [self.model.p, self.model.q, self.model.v, self.model.u, deps]
-        return sp.lambdify(args, _as_lists(expression), modules="math", cse=True)
+        return sp.lambdify(args, _as_lists(expression), modules="math", cse=_cse_nested)
 
     @cached_property
     def _functions(self) -> dict:

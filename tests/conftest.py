@@ -96,3 +96,46 @@ def fmu_cache(tmp_path_factory):
         os.environ.pop("PANTO_FMU_CACHE", None)
     else:
         os.environ["PANTO_FMU_CACHE"] = previous
+
+
+#: The test files that take longest (CPU seconds on one worker, measured 2026-11-26: the two
+#: diagnosis stories about 120 s each, the next ones 20-40 s), longest first. ``--dist loadfile``
+#: hands out files with the most tests first, so these few-test files came last and one worker
+#: ran them alone at the end; started first, the other files fill the second worker meanwhile.
+#: Only the order changes: a file missing here runs after these, a stale entry costs nothing.
+LONGEST_FILES = (
+    "test_diagnosis_rig_story.py", "test_diagnosis_pantograph.py", "test_adequacy.py",
+    "test_parameters_and_cli.py", "test_global_fit.py", "test_diagnosis_real_data.py",
+    "test_diagnosis_effects.py", "test_diagnosis_calibration.py", "test_pantograph_model.py",
+    "test_video_tracking.py", "test_diagnosis.py", "test_identify_any_table.py",
+    "test_identification_physical.py", "test_fmu_binaries.py", "test_diagnosis_global_fit.py",
+)
+
+
+def pytest_xdist_make_scheduler(config, log):
+    """``--dist loadfile`` with :data:`LONGEST_FILES` handed out first (longest first)."""
+    if config.getoption("dist", None) != "loadfile":
+        return None
+    from xdist.scheduler import LoadFileScheduling
+
+    class LongestFirst(LoadFileScheduling):
+        """xdist's file-by-file scheduling, the queue reordered once before the first file."""
+
+        ordered = False
+
+        def _assign_work_unit(self, node):
+            if not self.ordered:
+                self.ordered = True
+                rank = {name: i for i, name in enumerate(LONGEST_FILES)}
+                queue = list(self.workqueue)
+                for scope in sorted(queue, key=lambda s: (rank.get(_file_name(s), len(rank)),
+                                                          queue.index(s))):
+                    self.workqueue.move_to_end(scope)
+            super()._assign_work_unit(node)
+
+    return LongestFirst(config, log)
+
+
+def _file_name(scope: str) -> str:
+    """The file name of an xdist scope (``tests/test_x.py``)."""
+    return scope.split("::")[0].rsplit("/", 1)[-1]
