@@ -11,6 +11,7 @@ from scipy import optimize
 from scipy import signal as sps
 
 from panto.identification.diagnosis.effects import (
+    first_order_lag,
     EFFECTS,
     PANTOGRAPH_ROLES,
     SignalRoles,
@@ -93,6 +94,24 @@ def _parameter_sensitivities(force):
     steps = 1e-5 * nominal
     return np.column_stack([(simulate(*(nominal + h)) - simulate(*(nominal - h))) / (2 * h[i])
                             for i, h in enumerate(np.diag(steps))])
+
+
+@pytest.mark.parametrize("ratio", [0.1, 0.42, 1.0, 5.0])
+def test_first_order_lag_is_exact_for_inputs_linear_between_samples(ratio):
+    """The lag filter against an independent path: ``T w' + w = u`` integrated by ``solve_ivp``
+    with ``u`` linear between samples (the structures' first-order hold), at time constants from
+    a tenth of a sample period to five (the zero-order-hold filter used before missed by 4-11 %
+    of the input's range here)."""
+    from scipy.integrate import solve_ivp
+
+    h, T = 0.01, ratio * 0.01
+    t = np.arange(400) * h
+    u = np.sin(2 * np.pi * 3.0 * t) + 0.5 * np.sign(np.sin(2 * np.pi * 0.7 * t))
+    reference = solve_ivp(lambda s, w: (np.interp(s, t, u) - w) / T, (0.0, t[-1]), [u[0]],
+                          t_eval=t, method="LSODA", rtol=1e-11, atol=1e-12,
+                          max_step=h / 4).y[0]
+    assert np.max(np.abs(first_order_lag(u, T, h) - reference)) < 1e-7
+    assert np.array_equal(first_order_lag(u, 1e-9 * h, h), u)
 
 
 def test_cubic_spring_ranks_cubic_stiffness_first_and_shows_as_odd():

@@ -7,8 +7,10 @@ run) with the nominal parameters free too. Three kinds of augmentation:
 
 Input side (the inputs are transformed before the nominal simulates them)
     ``input_delay``  ``u(t - d)``, fractional ``d`` [s] by linear interpolation, ``u(0)`` held;
-    ``actuator_lag`` ``T w' + w = u``, exact first-order filter ``a = exp(-T_s / T)``;
-    ``dead_zone``    ``c + sign(u - c) max(|u - c| - b, 0)`` about the training median ``c``;
+    ``actuator_lag`` ``T w' + w = u``, exact for inputs linear between samples
+                     (:func:`~panto.identification.diagnosis.effects.first_order_lag`);
+    ``dead_zone``    ``c + sign(u - c) max(|u - c| - b, 0)``, the centre ``c`` fitted too (from
+                     the training median, within the input's range);
     ``saturation``   ``clip(s, s_low, s_high)`` of an input (or of the force output).
 Output side (added to one output, the *target*)
     ``offset``         ``y + c``;
@@ -50,8 +52,9 @@ import numpy as np
 from scipy import signal as sps
 
 from panto.identification.estimation.base import IdentificationData, IdentificationError, ModelStructure
-from panto.identification.diagnosis.effects import (EFFECTS, SignalRoles, play_operator, sensor_acceleration,
-                                    sensor_signal)
+from panto.identification.diagnosis.effects import (EFFECTS, SignalRoles, first_order_lag,
+                                                    play_operator, sensor_acceleration,
+                                                    sensor_signal)
 from panto.identification.structures.oscillator_effects import oscillator_with_effect
 from panto.identification.structures.oscillators import OscillatorStructure
 from panto.identification.structures.rigid_body import motion
@@ -243,6 +246,10 @@ class AugmentedStructure(ModelStructure):
         elif effect == "dead_zone":
             width = float(s.get("width", s.get("half_width", 0.0)))
             self._add(f"dead_zone:{self._input()}", width, (0.0, 10.0 * max(width, 1e-9)))
+            if "spread" in s:  # where the zone lies is not known either: about the median first
+                centre, spread = float(s.get("centre", 0.0)), max(float(s["spread"]), 1e-12)
+                self._add(f"dead_zone:{self._input()}:centre", centre,
+                          (centre - spread, centre + spread))
         elif effect == "saturation":
             signal = s.get("signal", self._input())
             low, high = float(s.get("low", -1.0)), float(s.get("high", 1.0))
@@ -288,6 +295,11 @@ class AugmentedStructure(ModelStructure):
         return force if force in self.output_names else str(self.setting["output"])
 
     # --- ModelStructure ------------------------------------------------------------------
+    @property
+    def input_refinement(self) -> bool:
+        """As the structure this one wraps (:meth:`ModelStructure.input_refinement`)."""
+        return bool(getattr(self.base, "input_refinement", False))
+
     def nominal(self) -> dict[str, float]:
         values = dict(self.base.nominal())
         values.update(self._starts)
@@ -309,8 +321,11 @@ class AugmentedStructure(ModelStructure):
         if self.mode == "equivalent":
             return self._simulate_equivalent(values, inner, data)
         if self.effect in INPUT_SIDE and not self._on_output():
-            data = self._transform_inputs(values, data)
-            return self.base.simulate(inner, data)
+            factor = self._refinement(values, data.sample_period) \
+                if self.base.input_refinement else 1
+            fine = _refined(data, factor)
+            y = np.asarray(self.base.simulate(inner, self._transform_inputs(values, fine)), float)
+            return y[::factor]
         y = np.array(self.base.simulate(inner, data), float)
         return self._transform_outputs(values, data, y)
 
@@ -344,6 +359,25 @@ class AugmentedStructure(ModelStructure):
         return self.base.simulate(inner, dataclasses.replace(data, inputs=inputs))
 
     # --- transforms -----------------------------------------------------------------------
+    def _refinement(self, values: Mapping[str, float], period: float) -> int:
+        """Sub-samples per sample for an input-side transform (:func:`_refined`; used when the
+        wrapped structure is continuous-time, :meth:`ModelStructure.input_refinement`): such
+        structures take their inputs as linear between samples, which the transformed input is not when the
+        transform bends it inside a sample - a lag shorter than four samples (``ceil(4 h / T)``,
+        at most 8), a delay that is no whole number of samples (8: its kinks fall between the
+        samples), a dead zone or a limit crossed between samples (4). A 4 ms lag at 100 Hz
+        simulated on the samples alone imitated an independent plant with that lag worse than a
+        4 ms delay did (on a contact force 50 kN/m stiff: 93.4 against 96.4 % fit to the
+        noise-free record; 99.9 % refined)."""
+        name = self._input()
+        if self.effect == "actuator_lag":
+            lag = values[f"actuator_lag:{name}"]
+            return 1 if not lag > 0.0 else int(min(8, max(1, math.ceil(4.0 * period / lag))))
+        if self.effect == "input_delay":
+            samples = values[f"input_delay:{name}"] / period
+            return 1 if abs(samples - round(samples)) < 1e-9 else 8
+        return 4
+
     def _transform_inputs(self, values: Mapping[str, float], data: IdentificationData
                           ) -> IdentificationData:
         name = self._input()
@@ -353,12 +387,10 @@ class AugmentedStructure(ModelStructure):
             d = values[f"input_delay:{name}"]
             u = np.interp(data.time - d, data.time, u)
         elif self.effect == "actuator_lag":
-            lag = values[f"actuator_lag:{name}"]
-            if lag > 1e-6 * data.sample_period:
-                a = math.exp(-data.sample_period / lag)
-                u = sps.lfilter([1 - a], [1, -a], u, zi=[a * u[0]])[0]
+            u = first_order_lag(u, values[f"actuator_lag:{name}"], data.sample_period)
         elif self.effect == "dead_zone":
-            width, centre = values[f"dead_zone:{name}"], float(self.setting.get("centre", 0.0))
+            width = values[f"dead_zone:{name}"]
+            centre = values.get(f"dead_zone:{name}:centre", float(self.setting.get("centre", 0.0)))
             shifted = u - centre
             u = centre + np.sign(shifted) * np.maximum(np.abs(shifted) - width, 0.0)
         elif self.effect == "saturation":
@@ -411,6 +443,25 @@ class AugmentedStructure(ModelStructure):
             y[:, target] = np.clip(y[:, target], values[f"saturation:{signal}:low"],
                                    values[f"saturation:{signal}:high"])
         return y
+
+
+def _refined(data: IdentificationData, factor: int) -> IdentificationData:
+    """`data` on a grid `factor` times finer, inputs and outputs linear between the samples (the
+    structures' own input convention, so the refined record holds the same input signal); every
+    `factor`-th sample of a simulation on it is a simulation on `data`."""
+    if factor <= 1:
+        return data
+    n = len(data.time)
+    fine = np.arange((n - 1) * factor + 1) / factor
+    grid = np.arange(n)
+
+    def spread(values: np.ndarray) -> np.ndarray:
+        return np.column_stack([np.interp(fine, grid, values[:, j])
+                                for j in range(values.shape[1])])
+
+    return dataclasses.replace(data, time=np.interp(fine, grid, data.time),
+                               inputs=spread(np.asarray(data.inputs, float)),
+                               outputs=spread(np.asarray(data.outputs, float)))
 
 
 def _state_space(structure: ModelStructure) -> ModelStructure | None:

@@ -161,6 +161,14 @@ class ModelStructure(ABC):
     output_names: tuple[str, ...] = ()
     parameter_names: tuple[str, ...] = ()
 
+    @property
+    def input_refinement(self) -> bool:
+        """Whether the structure simulates in continuous time with its inputs linear between
+        samples, cheaply enough that a record resampled on a finer grid is simulated equally
+        (every k-th sample the same): a transformed input may then be given between the samples.
+        False unless a subclass says so (a discrete-time model is not)."""
+        return False
+
     @abstractmethod
     def nominal(self) -> dict[str, float]:
         """Nominal (prior, default) value of every parameter."""

@@ -102,6 +102,12 @@ class OscillatorStructure(ModelStructure):
             names += [f"F_f{i + 1}" for i in range(masses)] + ["v_eps"]
         self.parameter_names = tuple(names)
 
+    @property
+    def input_refinement(self) -> bool:
+        """Continuous time, exact discretisation: refinable when inputs are linear between
+        samples (``hold="foh"``)."""
+        return self.hold == "foh"
+
     def nominal(self) -> dict[str, float]:
         """EN 50318 / Bruni values, a pressure gain of 100 N/bar and the relaxed height 2 m."""
         d = _NOMINAL[self.masses]

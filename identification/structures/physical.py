@@ -203,6 +203,12 @@ class PhysicalLinear(_PhysicalBase):
     extensions = ("kappa_p", "k_c3")
     difference_step = 1e-6
 
+    @property
+    def input_refinement(self) -> bool:
+        """Continuous time, exact discretisation: refinable when inputs are linear between
+        samples (``hold="foh"``)."""
+        return self.hold == "foh"
+
     def __init__(self, *, outputs: Sequence[str] = DEFAULT_OUTPUTS,
                  fixed: Mapping[str, float] | None = None, contact_stiffness: float | None = None,
                  operating_point: str = "mean", hold: str = "foh", eta_delay: float = 0.0) -> None:
