@@ -11,7 +11,9 @@ through the library's :func:`panto.identification.data.loading.load_identificati
   asks for it;
 - ``--sample-rate HZ`` for a table without a ``time``/``t`` column, ``--rate HZ`` to decimate
   (rig runs: 50 Hz by default), ``--train-samples``/``--validate-samples START:STOP`` to select
-  rows, ``--eta-offset`` for rig runs.
+  rows, ``--eta-offset`` for rig runs;
+- ``--key NAME``: an HDF5 file's table when it holds several (``FILE.h5:NAME`` names one per
+  file, e.g. two tables of one file to train and validate).
 
 It also holds the checked option types every command uses (:func:`positive_float`,
 :func:`positive_int`, :func:`non_negative_int`, :func:`non_negative_float`): a value out of range
@@ -101,6 +103,9 @@ def add_data_options(parser: argparse.ArgumentParser) -> None:
                         help="rows of the training file")
     parser.add_argument("--validate-samples", metavar="START:STOP",
                         help="rows of the validation file")
+    parser.add_argument("--key", metavar="NAME",
+                        help="HDF5 files: the table to read when a file holds several (or give "
+                             "the file as FILE.h5:NAME)")
     parser.add_argument("--eta-offset", type=float,
                         help="rig runs: height of the motor's zero [m] (default from the run's "
                              "metadata)")
@@ -131,7 +136,8 @@ def load_data(path: str, args: argparse.Namespace, *, validation: bool = False,
                           outputs=parse_pairs(args.outputs, "--outputs"), rate=args.rate,
                           sample_rate=args.sample_rate, rows=_rows(args, validation),
                           eta_offset=args.eta_offset, rig_mapping=rig_mapping,
-                          lowpass=getattr(args, "lowpass", None), **rig)
+                          lowpass=getattr(args, "lowpass", None),
+                          key=getattr(args, "key", None), **rig)
     return load_identification_data(path, options)
 
 

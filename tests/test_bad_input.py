@@ -47,6 +47,8 @@ def _plain_tables(folder: Path) -> None:
     spoiled = good.copy()  # a force held constant, varying only by rounding
     spoiled["force"] = 100.0 + 1e-12 * np.sin(3 * t)
     spoiled.to_csv(folder / "constant.csv", index=False)
+    for key in ("a", "b"):  # an HDF5 file with two tables: which one is not guessed
+        good.to_hdf(folder / "two.h5", key=key)
 
 
 def _rig_datasets(folder: Path) -> None:
@@ -154,6 +156,17 @@ CASES = [
     ("diagnose-unknown-option", "diagnose --train {f}/good.csv --validate {f}/good.csv --model two-mass {io} --option foo=bar", ["--option", "'foo'", "two-mass"]),
     ("diagnose-folds-0", "diagnose --train {f}/good.csv --validate {f}/good.csv --model two-mass {io} --folds 0", ["--folds", ">= 1"]),
     ("diagnose-sample-rate-negative", "diagnose --train {f}/good.csv --validate {f}/good.csv --model two-mass {io} --sample-rate -5", ["--sample-rate", "-5"]),
+    ("diagnose-option-not-a-name", "diagnose --train {f}/good.csv --validate {f}/good.csv --model two-mass {io} --option substeps=abc", ["--option", "substeps=abc", "'two-mass'", "an integer"]),
+    ("diagnose-option-out-of-range", "diagnose --train {f}/good.csv --validate {f}/good.csv --model two-mass {io} --option substeps=0", ["--option", "substeps=0", "at least 1"]),
+    ("diagnose-option-not-a-bool", "diagnose --train {f}/good.csv --validate {f}/good.csv --model linear-2 --inputs u=height --outputs y=force --option centre=maybe", ["--option", "centre=maybe", "'linear-2'", "true", "false"]),
+    ("diagnose-option-delay-out-of-range", "diagnose --train {f}/good.csv --validate {f}/good.csv --model linear-2 --inputs u=height --outputs y=force --option input_delay=-3", ["--option", "input_delay=-3", "-3", "from 0 to"]),
+    ("diagnose-unknown-candidate", "diagnose --train {f}/good.csv --validate {f}/good.csv --model two-mass {io} --candidates offset nosuch", ["--candidates", "'nosuch'", "coulomb_friction"]),
+    ("diagnose-unknown-role", "diagnose --train {f}/good.csv --validate {f}/good.csv --model two-mass {io} --roles nosuch=F_c", ["--roles", "'nosuch'", "position", "actuators"]),
+    ("diagnose-role-of-no-signal", "diagnose --train {f}/good.csv --validate {f}/good.csv --model two-mass {io} --roles force=nosuch", ["--roles", "force=nosuch", "eta", "F_c"]),
+    ("diagnose-max-evaluations-0", "diagnose --train {f}/good.csv --validate {f}/good.csv --model two-mass {io} --max-evaluations 0", ["--max-evaluations", ">= 1"]),
+    ("diagnose-workers-0", "diagnose --train {f}/good.csv --validate {f}/good.csv --model two-mass {io} --workers 0", ["--workers", "0", ">= 1"]),
+    ("diagnose-hdf5-which-table", "diagnose --train {f}/two.h5 --validate {f}/good.csv --model two-mass {io}", ["two.h5", "'a'", "'b'", "--key"]),
+    ("diagnose-hdf5-unknown-key", "diagnose --train {f}/two.h5:c --validate {f}/good.csv --model two-mass {io}", ["two.h5", "'c'", "'a'", "'b'"]),
     ("diagnose-unwritable-json", "diagnose --train {f}/good.csv --validate {f}/good.csv --model two-mass {io} --json {f}/a_file/d.json", ["--json", "a_file"]),
     # doe
     ("doe-duration-0", "doe --duration 0 --out {f}/doe", ["--duration", "> 0"]),
@@ -191,7 +204,8 @@ USAGE_CASES = {"preprocess-rate-0", "preprocess-rate-negative", "identify-rate-0
                "diagnose-folds-0", "diagnose-sample-rate-negative", "doe-duration-0",
                "doe-duration-negative", "doe-population-0", "linearise-negative-pressure",
                "render-scale-0", "render-duration-0", "setup-frame-negative",
-               "cosim-time-step-0", "unknown-option"}
+               "cosim-time-step-0", "unknown-option", "diagnose-unknown-candidate",
+               "diagnose-unknown-role", "diagnose-max-evaluations-0", "diagnose-workers-0"}
 
 
 def _argv(line: str, folder: Path) -> list[str]:

@@ -11,7 +11,8 @@ or a table in memory.
   Parquet, .mat): the named channels through
   :func:`~panto.identification.data.datasets.data_from_dataset`, resampled to ``rate``;
 - any other table (:func:`read_table`: CSV, Parquet, .mat or HDF5 with named numeric columns,
-  suffixes in any case; or in memory, a :class:`pandas.DataFrame` or a mapping of column name to
+  suffixes in any case; an HDF5 file's table named by ``key`` or ``FILE.h5:KEY``
+  (:mod:`~panto.identification.data.hdf5`); or in memory, a :class:`pandas.DataFrame` or a mapping of column name to
   array): the time base is the median step of a ``time``/``t`` column (printed times carry
   rounding), else a DataFrame's float index, else ``1 / sample_rate``; ``rate`` decimates with
   :func:`~panto.identification.data.preprocessing.decimate_zero_phase`.
@@ -22,7 +23,6 @@ left in the data: each structure says how it handles them (its result's ``detail
 """
 from __future__ import annotations
 
-import importlib.util
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -66,6 +66,9 @@ class LoadOptions:
         and backward, :func:`scipy.signal.sosfiltfilt`) applied to every used column of the whole
         record before the rows are selected and the data decimated (e.g. the EMPS benchmark's
         25 Hz prefilter, Janot et al. 2019).
+    key : str or None
+        HDF5 files: the table to read when the file holds several
+        (:func:`~panto.identification.data.hdf5.read_hdf5`; a path ``FILE.h5:KEY`` names it too).
     """
 
     inputs: Mapping[str, str] = field(default_factory=dict)
@@ -81,6 +84,7 @@ class LoadOptions:
     cross_bar: str = "laser"
     position_latency: float | None = None
     lowpass: float | None = None
+    key: str | None = None
 
     def __post_init__(self) -> None:
         if self.lowpass is not None and not (math.isfinite(self.lowpass) and self.lowpass > 0):
@@ -90,49 +94,61 @@ class LoadOptions:
 Table = Any  # pandas.DataFrame or Mapping[str, array-like]
 
 
-def read_table(source: str | Path | Table) -> dict[str, np.ndarray]:
+def read_table(source: str | Path | Table, key: str | None = None) -> dict[str, np.ndarray]:
     """Named numeric columns of a plain table, all of one length.
 
     Parameters
     ----------
     source : str, pathlib.Path, pandas.DataFrame or mapping of str to array
-        A CSV, Parquet, .mat or HDF5 (``.h5``, ``.hdf5``: needs PyTables) file, suffix in any
-        case; or a table in memory. A DataFrame without a ``time``/``t`` column whose index is
-        of floats gives that index as the column ``time`` [s].
+        A CSV, Parquet, .mat (v7.3 too) or HDF5 (``.h5``, ``.hdf5``: needs PyTables) file,
+        suffix in any case; or a table in memory. A DataFrame without a ``time``/``t`` column
+        whose index is of floats gives that index as the column ``time`` [s].
+    key : str, optional
+        HDF5: the table to read when the file holds several (or ``FILE.h5:KEY`` as `source`).
     """
     if not isinstance(source, (str, Path)):
         columns = _memory_columns(source)
         where = "table"
     else:
-        columns, where = _file_columns(Path(source)), str(source)
+        columns, where = _file_columns(Path(source), key), str(source)
     if not columns:
         raise ValueError(f"{where}: no numeric columns")
     length = max(len(v) for v in columns.values())
     return {k: v for k, v in columns.items() if len(v) == length}
 
 
-def _file_columns(path: Path) -> dict[str, np.ndarray]:
+def _file_columns(path: Path, key: str | None = None) -> dict[str, np.ndarray]:
     from panto.fmu_src.dataformat import TABLE_SUFFIXES, data_suffix
+    from panto.identification.data.hdf5 import read_hdf5, split_key
 
+    path, in_path = split_key(path)
+    key = in_path or key
     if not path.is_file():
         raise ValueError(f"{path}: no such {'file' if path.suffix else 'file or run folder'}")
     suffix = data_suffix(path, "table", TABLE_SUFFIXES)
+    if key is not None and suffix not in (".h5", ".hdf5", ".mat"):
+        raise ValueError(f"{path}: --key {key!r}: only an HDF5 file (.h5, .hdf5, v7.3 .mat) "
+                         "holds named tables")
     if suffix == ".mat":
         import scipy.io
 
         try:
             raw = scipy.io.loadmat(path)
+        except NotImplementedError:  # a v7.3 file: HDF5 inside
+            return _memory_columns(read_hdf5(path, key))
         except Exception as error:  # scipy's errors do not name the file
             raise ValueError(f"{path}: not a readable .mat file ({error})") from None
+        if key is not None:
+            raise ValueError(f"{path}: --key {key!r}: a .mat file before v7.3 holds one table")
         return {k: np.asarray(v, float).ravel() for k, v in raw.items()
                 if not k.startswith("__") and isinstance(v, np.ndarray) and v.dtype.kind in "fiu"
                 and v.size > 1 and min(v.shape) == 1}
     import pandas as pd
 
     if suffix in (".h5", ".hdf5"):
-        if importlib.util.find_spec("tables") is None:  # pandas reads HDF5 through PyTables
-            raise ValueError(f"{path}: HDF5 needs PyTables: pip install tables")
-        frame = pd.read_hdf(path)
+        frame = read_hdf5(path, key)
+        if not isinstance(frame, pd.DataFrame):
+            return frame
     else:
         frame = _read_frame(path, suffix)
     if len(frame) == 0:
@@ -233,7 +249,7 @@ def _load(source: str | Path | Table, options: LoadOptions) -> IdentificationDat
         data = data_from_dataset(dataset, inputs=inputs, outputs=outputs, rate=options.rate,
                                  source=path)
         return _window(select_rows(data, options.rows), options)
-    return _window(_table_data(path, read_table(path), options), options)
+    return _window(_table_data(path, read_table(path, options.key), options), options)
 
 
 def _is_run(path: str) -> bool:

@@ -95,12 +95,12 @@ def try_candidate(model: Model, candidate: Mapping[str, Any], current: np.ndarra
         result, new = refit(structure, model, train, free, fit_options)
         stage = "the refitted model is invalid on the validation run"
         try:
-            simulated = simulate(new, validation)
+            simulated = _finite_run(new, validation)
         except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError):
             # the refit from a distorted nominal may end where the model has no equilibrium at
             # the validation run's operating point: once more from the structure's defaults
             result, new = refit(structure, model, train, free, fit_options, from_defaults=True)
-            simulated = simulate(new, validation)
+            simulated = _finite_run(new, validation)
         trial = judge_trial(candidate, Refit(structure, result, simulated), model, train,
                             validation, current, search.options.folds)
         if not trial["accepted"] and effect in INSIDE:
@@ -124,6 +124,18 @@ def try_candidate(model: Model, candidate: Mapping[str, Any], current: np.ndarra
     return trial, new, simulated
 
 
+def _finite_run(model: Model, validation: IdentificationData) -> np.ndarray:
+    """The refitted `model`'s free run on the validation run; a run that diverges (NaN or inf)
+    is an :class:`IdentificationError` naming the first such sample."""
+    simulated = simulate(model, validation)
+    bad = np.flatnonzero(~np.all(np.isfinite(simulated), axis=1))
+    if bad.size:
+        raise IdentificationError(f"free run diverges: NaN/inf from t = "
+                                  f"{validation.time[bad[0]]:.4g} s, {bad.size} of "
+                                  f"{len(simulated)} samples")
+    return simulated
+
+
 def _second_start(candidate: Mapping[str, Any], structure: AugmentedStructure, model: Model,
                   free: tuple[str, ...], first: tuple, current: np.ndarray, search: Search
                   ) -> tuple:
@@ -133,7 +145,7 @@ def _second_start(candidate: Mapping[str, Any], structure: AugmentedStructure, m
     try:
         result, new = refit(structure, model, train, free, search.fit_options,
                              from_defaults=True)
-        simulated = simulate(new, validation)
+        simulated = _finite_run(new, validation)
     except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError):
         return first
     if not result.details.get("cost", math.inf) < first[1].details.get("cost", math.inf):

@@ -60,8 +60,7 @@ def write_report(diagnosis: Any, folder: str | Path, *,
             analysis, folder / f"nominal_{analysis.output_name}")]
     series = write_series(diagnosis, folder / "validation_series.csv")
     where = [t.paragraph(diagnosis.where.get("text", "")),
-             t.paragraph("Gap " + ("significant: " + "; ".join(diagnosis.gap["reasons"])
-                                   if diagnosis.gap["significant"] else "within the noise")),
+             t.paragraph(gap_sentence(diagnosis.gap, diagnosis.effects)),
              *[t.figure(p) for p in images + where_images]]
     sections = [{"title": "1. Where the gap lies (nominal model, validation run)", "blocks": where},
                 {"title": "2. Which effect: ranking on the training residual and refits",
@@ -107,11 +106,35 @@ def _which_blocks(diagnosis: Any) -> list[dict]:
                        t.table(["effect", "variant", "ERR", "significant"], rows)]
         rows = [[x["effect"], x["description"], x["delta_bic"], x["significance"],
                  x["improvement"], x["fold_spread"],
-                 t.cell("accepted", "ok") if x["accepted"] else "; ".join(x["failed"])]
+                 t.cell("accepted", "ok") if x["accepted"] else rejection(x)]
                 for x in round_["tried"]]
         blocks.append(t.table(["effect", "augmentation", "ΔBIC", "|θ|/σ",
                                "validation gain [points]", "fold spread", "decision"], rows))
     return blocks
+
+
+def gap_sentence(gap: Mapping[str, Any], effects: Any = ()) -> str:
+    """The nominal's gap in words, consistent with the verdict: significant with its reasons;
+    else within the noise (naming the flags left below the relevance floor), and when effects
+    were accepted all the same, that their withheld-data gain found what the tests did not."""
+    if gap.get("significant"):
+        return "Gap significant: " + "; ".join(gap.get("reasons", []))
+    ignored = gap.get("below_relevance") or []
+    text = "Gap within the noise by the residual tests" + (
+        " (flags below the relevance floor: " + "; ".join(ignored) + ")" if ignored else "")
+    if effects:
+        text += (f"; yet adding {' then '.join(effects)} improves the withheld fit "
+                 "significantly (section 3)")
+    return text
+
+
+def rejection(trial: Mapping[str, Any]) -> str:
+    """Why a refitted candidate (a round's ``tried`` entry) was rejected: the tests it failed,
+    and for a refit that failed (diverged, no valid model) the error, e.g. ``refit failed
+    (non-finite simulation)``."""
+    reasons = "; ".join(trial.get("failed", ())) or "rejected"
+    message = trial.get("message", "")
+    return f"{reasons} ({message})" if message and not trial.get("accepted") else reasons
 
 
 def _shrink_blocks(diagnosis: Any, bands: Path | None,
@@ -163,8 +186,9 @@ def _extra_mode_signals(diagnosis: Any, effect: str) -> tuple[str | None, str | 
 
 
 def markdown_report(diagnosis: Any, step_unit_maps: list[Mapping[str, str]]) -> str:
-    """``report.md``: the verdict, the validation fits before and after, and each accepted
-    effect's parameters with value, standard deviation and unit."""
+    """``report.md``: the verdict, the validation fits before and after, each accepted
+    effect's parameters with value, standard deviation and unit, and each rejected candidate
+    with its reason (:func:`rejection`)."""
     from panto.templating import format_number
 
     lines = [f"# Sim-to-real gap diagnosis: {diagnosis.structure}", "",
@@ -180,6 +204,12 @@ def markdown_report(diagnosis: Any, step_unit_maps: list[Mapping[str, str]]) -> 
             lines += [f"| {n} | {format_number(v, 5)} | "
                       f"{format_number(step.std.get(n, math.nan), 3)} | "
                       f"{unit_map.get(n, UNKNOWN)} |" for n, v in step.parameters.items()]
+    rejected = [(i + 1, x) for i, round_ in enumerate(diagnosis.rounds)
+                for x in round_.get("tried", ()) if not x.get("accepted")]
+    if rejected:
+        lines += ["", "## Candidates rejected", ""]
+        lines += [f"- round {i}: {x['effect']} ({x.get('variant', '')}): {rejection(x)}"
+                  for i, x in rejected]
     return "\n".join(lines) + "\n"
 
 
@@ -205,4 +235,4 @@ def _head(diagnosis: Any) -> list[dict]:
     return blocks
 
 
-__all__ = ["write_report", "step_units", "markdown_report"]
+__all__ = ["write_report", "step_units", "markdown_report", "rejection", "gap_sentence"]

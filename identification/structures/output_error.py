@@ -271,6 +271,10 @@ def linear_output_error_from_data(data: IdentificationData, order: int, *, input
     uncentred one's squared error, i.e. when the data carry a level that a model from rest
     through zero cannot produce; data without levels keep ``u_ref = y_ref = 0``.
     """
+    if not 0 <= input_delay < len(data) - 2 * order - 1:  # the ARX start needs rows
+        raise IdentificationError(f"linear OE: input delay {input_delay} samples: must be from "
+                                  f"0 to {len(data) - 2 * order - 2} for order {order} on "
+                                  f"{len(data)} samples")
     outputs = np.where(np.isfinite(data.outputs), data.outputs, np.nan)
     u_mean, y_mean = data.inputs.mean(axis=0), np.nanmean(outputs, axis=0)
     if centre is None:
