@@ -79,10 +79,16 @@ def main() -> int:
         validation = record(Path(root) / "validate", 32, args.duration)
     load_before = os.getloadavg()
     workers = resolve_workers(args.workers)
-    lines: list[str] = []
+    timeline: list[list] = []
     cpu_before = _cpu_seconds()
     started = time.perf_counter()
-    result = diagnose(train, validation, structure=args.structure, progress=lines.append,
+
+    def progress(line: str) -> None:
+        """The diagnosis' own steps with the wall time [s] at which they were said."""
+        if line.startswith("diagnose:"):
+            timeline.append([round(time.perf_counter() - started, 2), line[:100]])
+
+    result = diagnose(train, validation, structure=args.structure, progress=progress,
                       options=DiagnosisOptions(workers=workers))
     wall = time.perf_counter() - started
     cpu = _cpu_seconds() - cpu_before
@@ -93,7 +99,7 @@ def main() -> int:
         "workers": workers, "verdict": result.verdict,
         "effects": list(result.effects), "fit_before": dict(result.fit_before),
         "fit_after": dict(result.fit_after), "load_average_before": load_before,
-        "load_average_after": os.getloadavg(), "cpus": os.cpu_count(),
+        "load_average_after": os.getloadavg(), "cpus": os.cpu_count(), "timeline": timeline,
         "machine": platform.platform(), "python": platform.python_version()}
     out = ROOT / "benchmarks"
     (out / "diagnosis_speed.json").write_text(json.dumps(summary, indent=2))

@@ -9,6 +9,7 @@ nonlinear effect must beat.
 """
 from __future__ import annotations
 
+import dataclasses
 from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
@@ -71,17 +72,23 @@ def fitted_outputs(structure: ModelStructure, data: IdentificationData) -> tuple
 
 def adequate_nominal(nominal: ModelStructure, free: Sequence[str], train: IdentificationData,
                      result: Any, global_fit: GlobalFitOptions | None,
-                     fit_options: Mapping[str, Any], progress: Progress | None) -> tuple[Any, Any]:
+                     fit_options: Mapping[str, Any], progress: Progress | None,
+                     pool: Any = None) -> tuple[Any, Any]:
     """The nominal's fit and its adequacy; refitted globally when a black box shows that a single
-    start did not converge (:attr:`DiagnosisOptions.adequacy`)."""
+    start did not converge (:attr:`DiagnosisOptions.adequacy`). The global refit's default start
+    is `result` (a single start from the defaults with `fit_options`), not fitted again; `pool`
+    (an executor or None) fits the black boxes and the global refit's independent starts in
+    parallel."""
     data = train.select_outputs(fitted_outputs(nominal, train))
-    adequacy = check_adequacy(nominal, result, data, progress=indented(progress))
+    adequacy = check_adequacy(nominal, result, data, progress=indented(progress), executor=pool)
     if adequacy.verdict != "not converged":
         return result, adequacy
     if progress:
         progress("diagnose: adequacy: " + adequacy.message + "; refitting the nominal globally")
-    result = fit_nominal(nominal, free, train, progress=indented(progress),
-                         global_fit=global_fit or GlobalFitOptions(), **fit_options)
+    settings = dataclasses.replace(global_fit or GlobalFitOptions(), starts_executor=pool)
+    result = fit_nominal(nominal, free, train, progress=indented(progress), global_fit=settings,
+                         default=None if "global_fit" in result.details else result,
+                         **fit_options)
     return result, check_adequacy(nominal, result, data, reference=adequacy)
 
 

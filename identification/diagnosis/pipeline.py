@@ -21,7 +21,9 @@ causes it, and how far the gap shrinks once that effect is in the model.
    differs from zero, each at 1 % after a Bonferroni correction over the lags and signals tested,
    the mean's standard error from the effective sample size ``N_eff = N / (1 + 2 sum r(tau)^2)``.
    Whiteness alone does not count: a free-run residual may be coloured by coloured measurement
-   noise.
+   noise. A systematic part costing ``CLEAR_GAP`` = 10 fit points or more is a gap by itself
+   (:data:`~panto.identification.diagnosis.support.CLEAR_GAP`: short records leave the tests
+   without power).
 3. **Which.** Rank the candidates of :data:`~panto.identification.diagnosis.effects.EFFECTS` by FROLS on the
    *training* residual (the validation run stays withheld), the nominal parameters' sensitivities
    projected out; refit the top ``max_refits`` significant ones as
@@ -284,8 +286,9 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
                          global_fit=options.global_fit, **fit_options)
     adequacy = None
     if options.adequacy:
-        result, adequacy = adequate_nominal(nominal, free, train, result, options.global_fit,
-                                            fit_options, progress)
+        with trial_pool(resolve_workers(options.workers), executor) as pool:
+            result, adequacy = adequate_nominal(nominal, free, train, result, options.global_fit,
+                                                fit_options, progress, pool)
         say("diagnose: adequacy: " + adequacy.message)
     model = Model(nominal, dict(result.parameters), tuple(free), dict(result.std),
                   np.asarray(result.covariance, float), dict(result.fit))
@@ -303,7 +306,7 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
     verdict = "effect" if steps else ("unexplained" if gap["significant"] else "none")
     fit_after = fit_per_output(validation, current)
     where = where_summary(analysis_before, validation)
-    summary = _summary(verdict, accepted, fit_before, fit_after, where, remaining_gap) + \
+    summary = _summary(verdict, accepted, fit_before, fit_after, where, remaining_gap, gap) + \
         _training_only_text(_training_only(rounds, accepted))
     hypothesis = _discovery(model, train, validation, executor, progress,
                             adequacy or adequacy_quietly(nominal, result, train)) \
@@ -536,18 +539,28 @@ def _step(trial: Trial, data: IdentificationData, before: np.ndarray, after: np.
 
 def _summary(verdict: str, effects: Sequence[str], before: Mapping[str, float],
              after: Mapping[str, float], where: Mapping[str, Any],
-             remaining: Mapping[str, Any]) -> str:
+             remaining: Mapping[str, Any], gap: Mapping[str, Any] | None = None) -> str:
+    """The verdict in one sentence that says only what the tests found: ``none`` names a test
+    flag left below the relevance floor; an effect accepted where the nominal's gap tests had
+    not flagged a gap says that the withheld gain found it (`gap`: the nominal's; without a
+    step it is `remaining`)."""
+    gap = remaining if gap is None else gap
     if verdict == "none":
-        return ("the gap is within the noise: the validation residual is independent of the "
-                "inputs, shows no nonlinearity and no offset, and no candidate effect improves "
-                "the withheld fit significantly")
+        ignored = gap.get("below_relevance") or []
+        return ("the gap is within the noise: " + (
+            "the residual tests flag only what costs less than the relevance floor ("
+            + "; ".join(ignored) + ")" if ignored else "the validation residual is independent "
+            "of the inputs, shows no nonlinearity and no offset") +
+            ", and no candidate effect improves the withheld fit significantly")
     fits = ", ".join(f"{o} {before[o]:.1f} -> {after[o]:.1f} %" for o in before)
     if verdict == "unexplained":
         return (f"a significant gap that no candidate closes on the withheld data; it lies "
-                f"{where.get('text', '')}")
+                f"{where.get('text') or 'in the residual (no band or condition stands out)'}")
+    unflagged = "" if gap.get("significant", True) else (
+        " (the nominal's residual tests had not flagged a gap; the withheld fit gain did)")
     rest = "; a significant gap remains: " + "; ".join(remaining.get("reasons", [])) \
         if remaining.get("significant") else ""
-    return f"{' then '.join(effects)}: validation fit {fits}{rest}"
+    return f"{' then '.join(effects)}: validation fit {fits}{unflagged}{rest}"
 
 
 def _training_only(rounds: Sequence[Mapping[str, Any]], accepted: Sequence[str]

@@ -131,6 +131,10 @@ class GlobalFitOptions:
     refitted (it would converge to the same point)."""
     executor: Any = None
     """Evaluates Jacobian columns in parallel (``concurrent.futures.Executor``)."""
+    starts_executor: Any = None
+    """Runs independent starts in parallel (``concurrent.futures.Executor``): the frequency
+    mapping's polished starts, the data-driven time-domain starts, the perturbations. Each start
+    runs the same code on the same data: the result is the serial one."""
     frequency: FrequencyFitOptions = FrequencyFitOptions()
     """Options of the frequency-domain mapping."""
     seed: int = 0
@@ -184,16 +188,44 @@ class _FrequencyProblem:
 INVALID_RESIDUAL = 1e6
 
 
-def _safe(residuals: Callable[[np.ndarray], np.ndarray], size: int
-          ) -> Callable[[np.ndarray], np.ndarray]:
-    """Residuals, or :data:`INVALID_RESIDUAL` everywhere where the structure is invalid."""
-    def call(z: np.ndarray) -> np.ndarray:
+class _ReducedCost:
+    """The weighted frequency residual over the `relevant` transformed parameters (the others
+    kept at `z_start`), or :data:`INVALID_RESIDUAL` everywhere where the structure is invalid.
+    Picklable: the polished starts may run in worker processes."""
+
+    def __init__(self, frequency_problem: _FrequencyProblem, z_start: np.ndarray,
+                 relevant: np.ndarray, size: int) -> None:
+        self.frequency_problem, self.z_start = frequency_problem, z_start
+        self.relevant, self.size = relevant, size
+
+    def full(self, x: np.ndarray) -> np.ndarray:
+        """All transformed parameters from the relevant ones `x`."""
+        z = self.z_start.copy()
+        z[self.relevant] = x
+        return z
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
         try:
-            r = residuals(z)
-            return r if np.all(np.isfinite(r)) else np.full(size, INVALID_RESIDUAL)
+            r = self.frequency_problem.residuals(self.full(x))
+            return r if np.all(np.isfinite(r)) else np.full(self.size, INVALID_RESIDUAL)
         except (ValueError, ArithmeticError, RuntimeError, np.linalg.LinAlgError):
-            return np.full(size, INVALID_RESIDUAL)
-    return call
+            return np.full(self.size, INVALID_RESIDUAL)
+
+
+def _polish(cost: _ReducedCost, x: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+            max_nfev: int) -> tuple[float, np.ndarray]:
+    """One screening point polished by trust-region reflective least squares within the
+    bounds; its half squared residual and end point."""
+    fit = optimize.least_squares(cost, np.clip(x, lo, hi), bounds=(lo, hi), method="trf",
+                                 max_nfev=max_nfev, diff_step=1e-6, x_scale=1.0)
+    return _half_square(fit.fun), fit.x
+
+
+def _map(executor: Any, function: Callable, *arguments: Sequence[Any]) -> list[Any]:
+    """``[function(*a) for a in zip(*arguments)]``, on `executor` when given (in order)."""
+    if executor is None or len(arguments[0]) < 2:
+        return [function(*a) for a in zip(*arguments)]
+    return list(executor.map(function, *arguments))
 
 
 def frequency_blind(frequency_problem: _FrequencyProblem, z0: np.ndarray) -> np.ndarray:
@@ -215,7 +247,8 @@ def initial_from_data(structure: ModelStructure, data: IdentificationData, free:
                       *, initial: Mapping[str, float] | None = None,
                       bounds: Mapping[str, tuple[float, float]] | None = None,
                       bla: BestLinearApproximation | None = None,
-                      options: FrequencyFitOptions = FrequencyFitOptions()) -> list[Candidate]:
+                      options: FrequencyFitOptions = FrequencyFitOptions(),
+                      executor: Any = None) -> list[Candidate]:
     """Data-driven start values: the structure's frequency response fitted to the data's.
 
     Parameters
@@ -230,6 +263,8 @@ def initial_from_data(structure: ModelStructure, data: IdentificationData, free:
     bla : BestLinearApproximation, optional
         Default :func:`best_linear_approximation` of `data`.
     options : FrequencyFitOptions
+    executor : concurrent.futures.Executor, optional
+        Polishes the starts in parallel (the result is the serial one).
 
     Returns
     -------
@@ -246,25 +281,16 @@ def initial_from_data(structure: ModelStructure, data: IdentificationData, free:
     relevant = ~frequency_blind(frequency_problem, z_start)
     lo = np.where(np.isfinite(lower), lower, z_start - 3.0)[relevant]
     hi = np.where(np.isfinite(upper), upper, z_start + 3.0)[relevant]
-
-    def full(x: np.ndarray) -> np.ndarray:
-        z = z_start.copy()
-        z[relevant] = x
-        return z
-
-    cost = _safe(lambda x: frequency_problem.residuals(full(x)), size)
+    cost = _ReducedCost(frequency_problem, z_start, relevant, size)
     sobol = qmc.Sobol(int(relevant.sum()), scramble=True, seed=options.seed)
     points = [z_start[relevant]] + list(lo + (hi - lo) * sobol.random(options.screening))
     screened = sorted(((_half_square(cost(x)), x) for x in points), key=lambda pair: pair[0])
-    polished = []
-    for _, x in _distinct(screened, options.starts, options.distinct):
-        fit = optimize.least_squares(cost, np.clip(x, lo, hi), bounds=(lo, hi), method="trf",
-                                     max_nfev=max(1, options.max_evaluations // (len(x) + 1)),
-                                     diff_step=1e-6,
-                                     x_scale=1.0)
-        polished.append((_half_square(fit.fun), fit.x))
+    chosen = [x for _, x in _distinct(screened, options.starts, options.distinct)]
+    budget = max(1, options.max_evaluations // (int(relevant.sum()) + 1))
+    polished = _map(executor, _polish, [cost] * len(chosen), chosen, [lo] * len(chosen),
+                    [hi] * len(chosen), [budget] * len(chosen))
     polished.sort(key=lambda pair: pair[0])
-    return [Candidate(problem.parameters(full(x)), c, math.sqrt(2 * c / size))
+    return [Candidate(problem.parameters(cost.full(x)), c, math.sqrt(2 * c / size))
             for c, x in _distinct(polished, options.candidates, options.distinct)]
 
 
@@ -291,6 +317,7 @@ def fit_global(structure: ModelStructure, data: IdentificationData, *, free: Seq
                initial: Mapping[str, float] | None = None,
                bounds: Mapping[str, tuple[float, float]] | None = None,
                options: GlobalFitOptions = GlobalFitOptions(), progress: Progress | None = None,
+               default: IdentificationResult | None = None,
                **least_squares: Any) -> IdentificationResult:
     """Fit from the defaults, from the data and from perturbations; the best, with a verdict.
 
@@ -306,6 +333,9 @@ def fit_global(structure: ModelStructure, data: IdentificationData, *, free: Seq
     options : GlobalFitOptions
     progress : callable, optional
         Receives a line per start.
+    default : IdentificationResult, optional
+        The default start's result when it is already fitted (the same least-squares options
+        from `initial`, ``max_evaluations`` of `options`): not fitted again.
     **least_squares
         Further options of every
         :func:`~panto.identification.estimation.least_squares.fit_least_squares` run
@@ -325,9 +355,12 @@ def fit_global(structure: ModelStructure, data: IdentificationData, *, free: Seq
     say = progress or (lambda line: None)
     problem, _, lower, upper = make_problem(structure, data, free, initial, bounds)
     run = _Runner(structure, data, tuple(free), initial, bounds, options, least_squares)
-    runs = [run("default", dict(initial or {}))]
-    say(f"{structure.name}: default start: {_fits(runs[0][1])}")
+    runs = [("default", default, "") if default is not None else
+            run("default", dict(initial or {}))]
+    say(f"{structure.name}: default start: {_fits(runs[0][1])}" +
+        (" (the fit already made)" if default is not None else ""))
     candidates, note, bla = _data_driven(structure, data, free, initial, bounds, options, say)
+    jobs = []
     for k, candidate in enumerate(candidates[:options.data_starts], 1):
         distance = _distance(problem, candidate.parameters, runs[0][1].parameters,
                              note.get("blind", ()))
@@ -335,16 +368,16 @@ def fit_global(structure: ModelStructure, data: IdentificationData, *, free: Seq
             runs.append((f"data-driven {k}", runs[0][1], "coincides with the default result"))
             say(f"{structure.name}: data-driven start {k} coincides with the default result")
             continue
-        runs.append(run(f"data-driven {k}", candidate.parameters, offsets=note.get("blind", ())))
-        say(f"{structure.name}: data-driven start {k}: {_fits(runs[-1][1])}")
+        jobs.append((f"data-driven {k}", candidate.parameters, tuple(note.get("blind", ()))))
+    runs += _starts(run, jobs, options.starts_executor, say)
     rng = np.random.default_rng(options.seed)
     best = min((r for _, r, _ in runs), key=_cost)
     z_best = problem.z_of(np.array([best.parameters[n] for n in free]))
     spread = _spread(problem, best, z_best, options)
-    for k in range(options.perturbations):
-        z = np.clip(z_best + spread * rng.normal(size=len(z_best)), lower, upper)
-        runs.append(run(f"perturbation {k + 1}", problem.parameters(z)))
-        say(f"{structure.name}: perturbation {k + 1}: {_fits(runs[-1][1])}")
+    jobs = [(f"perturbation {k + 1}", problem.parameters(np.clip(
+        z_best + spread * rng.normal(size=len(z_best)), lower, upper)), ())
+        for k in range(options.perturbations)]
+    runs += _starts(run, jobs, options.starts_executor, say)
     best = min((r for _, r, _ in runs), key=_cost)
     if not best.success and options.polish_evaluations > 0 and math.isfinite(_cost(best)):
         runs.append(run("polish", best.parameters, budget=options.polish_evaluations))
@@ -388,6 +421,12 @@ class _Runner:
         self.structure, self.data, self.free, self.bounds = structure, data, free, bounds
         self.initial, self.options, self.extra = dict(initial or {}), options, dict(least_squares)
 
+    def without_executors(self) -> "_Runner":
+        """This runner with neither Jacobian nor start executor (a worker process's task)."""
+        options = dataclasses.replace(self.options, executor=None, starts_executor=None)
+        return _Runner(self.structure, self.data, self.free, self.initial, self.bounds, options,
+                       self.extra)
+
     def __call__(self, origin: str, start: Mapping[str, float], offsets: Sequence[str] = (),
                  budget: int | None = None) -> tuple[str, IdentificationResult, str]:
         limits = {**self.structure.bounds(), **dict(self.bounds or {})}
@@ -412,6 +451,19 @@ class _Runner:
             result, n_evaluations=result.n_evaluations + evaluations), ""
 
 
+def _starts(run: _Runner, jobs: Sequence[tuple[str, Mapping[str, float], Sequence[str]]],
+            executor: Any, say: Progress) -> list[tuple[str, IdentificationResult, str]]:
+    """The time-domain starts `jobs` (origin, start, offsets fitted first), on `executor` when
+    given (the runner sent without executors), in order; a line per start."""
+    if executor is not None and len(jobs) > 1:
+        run = run.without_executors()
+    done = _map(executor if len(jobs) > 1 else None, run, *zip(*jobs)) if jobs else []
+    for origin, result, _ in done:
+        label = origin.replace("data-driven", "data-driven start")
+        say(f"{run.structure.name}: {label}: {_fits(result)}")
+    return done
+
+
 def _data_driven(structure: ModelStructure, data: IdentificationData, free: Sequence[str],
                  initial: Mapping[str, float] | None,
                  bounds: Mapping[str, tuple[float, float]] | None, options: GlobalFitOptions,
@@ -426,7 +478,8 @@ def _data_driven(structure: ModelStructure, data: IdentificationData, free: Sequ
     try:
         bla = best_linear_approximation(data)
         candidates = initial_from_data(structure, data, free, initial=initial, bounds=bounds,
-                                       bla=bla, options=options.frequency)
+                                       bla=bla, options=options.frequency,
+                                       executor=options.starts_executor)
         problem, z0, _, _ = make_problem(structure, data, free, initial, bounds)
         blind = frequency_blind(_FrequencyProblem(structure, data, problem, bla,
                                                   options.frequency.relative_floor), z0)

@@ -119,7 +119,7 @@ def check_adequacy(structure: ModelStructure, result: IdentificationResult,
                    data: IdentificationData, *, orders: Sequence[int] | None = None,
                    floor: float = RELEVANCE_FLOOR, significance: float = SIGNIFICANCE,
                    max_evaluations: int = 100, progress: Progress | None = None,
-                   reference: Adequacy | None = None) -> Adequacy:
+                   reference: Adequacy | None = None, executor: Any = None) -> Adequacy:
     """Fit black boxes to `data` and judge the nominal `result` against the best of them.
 
     Parameters
@@ -142,6 +142,8 @@ def check_adequacy(structure: ModelStructure, result: IdentificationResult,
     reference : Adequacy, optional
         An earlier check on the same data whose best black box is reused (after a refit of the
         nominal).
+    executor : concurrent.futures.Executor, optional
+        Fits the black boxes of the orders in parallel (the result is the serial one).
     """
     missing = [o for o in data.output_names if o not in result.fit]
     if missing:
@@ -152,8 +154,12 @@ def check_adequacy(structure: ModelStructure, result: IdentificationResult,
     if reference is not None and reference.black_box is not None:
         best, best_order, orders = reference.black_box, reference.order, reference.orders
     varying = _varying_inputs(data)
-    for order in orders if best is None else ():
-        box = fit_state_space(varying, order, max_evaluations=max_evaluations)
+    todo = orders if best is None else ()
+    boxes = list(executor.map(_black_box, [varying] * len(todo), todo,
+                              [max_evaluations] * len(todo))) \
+        if executor is not None and len(todo) > 1 else \
+        [_black_box(varying, order, max_evaluations) for order in todo]
+    for order, box in zip(todo, boxes):
         if progress:
             progress(f"adequacy: black box of order {order}: " + _fits(box.fit))
         if best is None or _residual(box.fit) < _residual(best.fit):
@@ -185,6 +191,12 @@ def with_adequacy(structure: ModelStructure, result: IdentificationResult,
         text += "; so the global optimum in cost is reached although the starts did not show it"
     return dataclasses.replace(result, message=f"{result.message}; {text}",
                                details={**result.details, "adequacy": adequacy.to_dict()})
+
+
+def _black_box(data: IdentificationData, order: int, max_evaluations: int
+               ) -> IdentificationResult:
+    """The black box of `order` states fitted to `data` (an executor's task)."""
+    return fit_state_space(data, order, max_evaluations=max_evaluations)
 
 
 def _varying_inputs(data: IdentificationData) -> IdentificationData:
