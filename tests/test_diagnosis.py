@@ -172,7 +172,7 @@ def test_augmentations_transform_inputs_and_outputs_as_documented():
 
 
 def test_fold_improvements_share_the_whole_run_change_and_ignore_a_quiet_blocks_scale():
-    from panto.identification.diagnosis.support import _fold_improvements
+    from panto.identification.diagnosis.support import fold_improvements
 
     n = 400
     t = np.arange(n) * 0.01
@@ -182,7 +182,7 @@ def test_fold_improvements_share_the_whole_run_change_and_ignore_a_quiet_blocks_
     current = y + 0.05 * np.cos(7 * t)
     simulated = current.copy()
     simulated[:100] = y[:100] + 0.01 * np.cos(7 * t[:100])  # better only in the quiet block
-    folds = _fold_improvements(data, current[:, None], simulated[:, None], 4)[:, 0]
+    folds = fold_improvements(data, current[:, None], simulated[:, None], 4)[:, 0]
     whole = fit_percent(y, simulated) - fit_percent(y, current)
     # Only block 0 changed: its value is K times the whole-run change, the others are zero,
     # so the folds' mean IS the whole-run improvement the acceptance compares it with.

@@ -40,7 +40,10 @@ causes it, and how far the gap shrinks once that effect is in the model.
    The passing candidate with the largest
    validation improvement is accepted, unless others come within that improvement's standard
    error: then the lowest ``dBIC`` among them (parsimony, :func:`_choose`); the search repeats on
-   what remains (``max_effects``).
+   what remains (``max_effects``). Beside the refits, every round tries ``offset`` *between the
+   runs* (a sensor re-zeroed, a preload moved between them; the training run cannot show it):
+   measured on the withheld run's first fold, judged on the others by the same validation tests
+   and ``|d| / sigma_d > 3`` (:mod:`~panto.identification.diagnosis.run_offset`).
 4. **How far.** Per accepted effect: the validation fit before and after per output, residual
    energy per band and segment before and after, the share of residual energy removed, and the
    effect's parameters with their standard deviations.
@@ -52,6 +55,7 @@ reported with where it lies). No attribution is forced.
 from __future__ import annotations
 
 import math
+import dataclasses
 import time
 from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
@@ -68,6 +72,7 @@ from panto.identification.diagnosis.refit import Model, Search, Trial, try_candi
 from panto.identification.diagnosis.residual_analysis import (ErrorModelOptions, OutputAnalysis,
                                                              analyse_residuals)
 from panto.identification.diagnosis.residual_energy import jsonable
+from panto.identification.diagnosis import run_offset
 from panto.identification.diagnosis.support import (NO_GAIN_REASONS, build_structure,
                                                     default_roles, drift_test, effective_samples,
                                                     gap_significance, retuning, settling_time,
@@ -379,6 +384,7 @@ def _search(model: Model, before: np.ndarray, candidates: Sequence[str], search:
             (", ".join(f"{c['effect']} (ERR {c['err']:.3f})" for c in ranking["top"]) or
              "no significant candidate"))
         trials = map_trials(try_candidate, model, ranking["top"], current, search, pool)
+        trials += _between_runs(model, current, remaining, search)
         passing = [t for t in trials if t[0].accepted]
         rounds.append({"ranking": ranking["per_output"], "tried": [t[0].__dict__ for t in trials]})
         if not passing:
@@ -388,8 +394,34 @@ def _search(model: Model, before: np.ndarray, candidates: Sequence[str], search:
         steps.append(_step(trial, validation, current, simulated))
         accepted.append(trial.effect)
         say(f"diagnose: accepted {trial.effect}: validation fit " + _fits(trial.fit_validation))
+        if trial.variant == run_offset.VARIANT:  # a property of the withheld run: kept for
+            shift = simulated - current               # every later free run on it
+            if search.validation_shift is not None:
+                shift = shift + search.validation_shift
+            search = dataclasses.replace(search, validation_shift=shift)
         model, current = new_model, simulated
     return model, current, rounds, steps, accepted
+
+
+def _between_runs(model: Model, current: np.ndarray, remaining: Sequence[str],
+                  search: Search) -> list[tuple[Trial, Model, np.ndarray]]:
+    """The ``offset`` candidate's between-runs variant on the output it helps most
+    (:mod:`~panto.identification.diagnosis.run_offset`): measured on the withheld run's first
+    fold, judged on the others; nothing refitted."""
+    if "offset" not in remaining:
+        return []
+    folds, say = search.options.folds, search.say
+    judged = [(shift, run_offset.judge_shift(shift, search.validation, current, folds))
+              for shift in run_offset.shifts(search.validation, current, folds)]
+    if not judged:
+        return []
+    shift, fields = max(judged, key=lambda j: j[1]["improvement"])
+    trial = Trial(**fields)
+    say(f"  offset ({run_offset.VARIANT}, {shift['output']} {shift['shift']:+.4g}): "
+        f"|theta|/sigma {trial.significance:.1f}, validation +{trial.improvement:.2f} points "
+        f"(fold spread {trial.fold_spread:.2f}): " +
+        ("accepted" if trial.accepted else "rejected (" + ", ".join(trial.failed) + ")"))
+    return [(trial, model, shift["simulated"])]
 
 
 def _fits(fits: Mapping[str, float]) -> str:

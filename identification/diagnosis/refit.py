@@ -78,6 +78,9 @@ class Search:
     linear_level: Mapping[str, float] | None = None
     """Validation fit [%] per output of the adequacy's black box (:attr:`DiagnosisOptions.
     adequacy`), or None."""
+    validation_shift: np.ndarray | None = None
+    """What accepted between-run offsets add to every free run on the validation run (shape
+    (N, outputs); :mod:`~panto.identification.diagnosis.run_offset`), or None."""
 
 
 def try_candidate(model: Model, candidate: Mapping[str, Any], current: np.ndarray,
@@ -95,12 +98,12 @@ def try_candidate(model: Model, candidate: Mapping[str, Any], current: np.ndarra
         result, new = refit(structure, model, train, free, fit_options)
         stage = "the refitted model is invalid on the validation run"
         try:
-            simulated = _finite_run(new, validation)
+            simulated = _finite_run(new, validation, search.validation_shift)
         except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError):
             # the refit from a distorted nominal may end where the model has no equilibrium at
             # the validation run's operating point: once more from the structure's defaults
             result, new = refit(structure, model, train, free, fit_options, from_defaults=True)
-            simulated = _finite_run(new, validation)
+            simulated = _finite_run(new, validation, search.validation_shift)
         trial = judge_trial(candidate, Refit(structure, result, simulated), model, train,
                             validation, current, search.options.folds)
         if not trial["accepted"] and effect in INSIDE:
@@ -124,10 +127,14 @@ def try_candidate(model: Model, candidate: Mapping[str, Any], current: np.ndarra
     return trial, new, simulated
 
 
-def _finite_run(model: Model, validation: IdentificationData) -> np.ndarray:
-    """The refitted `model`'s free run on the validation run; a run that diverges (NaN or inf)
-    is an :class:`IdentificationError` naming the first such sample."""
+def _finite_run(model: Model, validation: IdentificationData,
+                shift: np.ndarray | None = None) -> np.ndarray:
+    """The refitted `model`'s free run on the validation run (plus `shift`, the accepted
+    between-run offsets); a run that diverges (NaN or inf) is an :class:`IdentificationError`
+    naming the first such sample."""
     simulated = simulate(model, validation)
+    if shift is not None:
+        simulated = simulated + shift
     bad = np.flatnonzero(~np.all(np.isfinite(simulated), axis=1))
     if bad.size:
         raise IdentificationError(f"free run diverges: NaN/inf from t = "
@@ -145,7 +152,7 @@ def _second_start(candidate: Mapping[str, Any], structure: AugmentedStructure, m
     try:
         result, new = refit(structure, model, train, free, search.fit_options,
                              from_defaults=True)
-        simulated = _finite_run(new, validation)
+        simulated = _finite_run(new, validation, search.validation_shift)
     except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError):
         return first
     if not result.details.get("cost", math.inf) < first[1].details.get("cost", math.inf):

@@ -14,12 +14,12 @@ Formulas (the diagnosis reference, ``identification_and_diagnosis.md``):
 - ``|theta| / (sigma_theta sqrt(N / N_eff)) > 3`` for the effect's magnitude parameter;
 - validation improvement (mean fit over outputs, free run) larger than the spread of the
   improvement over ``K`` blocked folds (each fold's share of the whole-run change, times ``K``:
-  :func:`_fold_improvements`), taken as the standard error of their mean
+  :func:`fold_improvements`), taken as the standard error of their mean
   (``std_k / sqrt(K)``): the raw standard deviation would reject real effects on non-stationary
   validation runs (the Silverbox "arrow" grows in amplitude, so an effect helps most at its end);
 - no output's validation fit worse by more than ``t_{0.975,K-1}`` of its own fold standard error
   (and :data:`WORSENING_FLOOR` points): the cause of a gap does not trade one output's fit for
-  another's (:func:`_worsened`);
+  another's (:func:`worsened`);
 - some output's validation fit better by at least :data:`IMPROVEMENT_FLOOR` points: a
   consistent but negligible gain (0.03 points of a 99 % fit) is no cause of a gap anyone sees;
 - an augmentation without parameters (a switch: the unilateral contact) fits nothing to the
@@ -270,11 +270,11 @@ def judge_trial(candidate: Mapping[str, Any], refit: Refit, model: Any,
     fit_before = _fits(validation, current)
     fit_after = _fits(validation, refit.simulated)
     improvement = float(np.mean([fit_after[o] - fit_before[o] for o in fit_before]))
-    per_output = _fold_improvements(validation, current, refit.simulated, folds)
+    per_output = fold_improvements(validation, current, refit.simulated, folds)
     per_fold = [float(v) for v in np.nanmean(per_output, axis=1)]
     spread = float(np.std(per_fold, ddof=1)) if len(per_fold) > 1 else 0.0
     standard_error = spread / math.sqrt(len(per_fold))
-    failed = _worsened(fit_before, fit_after, per_output)
+    failed = worsened(fit_before, fit_after, per_output)
     threshold = BIC_THRESHOLD if p else SWITCH_BIC
     if not delta_bic < threshold:
         failed.append(f"dBIC {delta_bic:.1f} >= {threshold:g}")
@@ -326,7 +326,7 @@ def _significance(effect: str, structure: Any, own: Mapping[str, float],
     return max(ratio(n) for n in names)
 
 
-def _fold_improvements(validation: IdentificationData, current: np.ndarray,
+def fold_improvements(validation: IdentificationData, current: np.ndarray,
                        simulated: np.ndarray, folds: int) -> np.ndarray:
     """Fit improvement [points] per blocked fold (rows) and output (columns), additive.
 
@@ -348,7 +348,7 @@ def _fold_improvements(validation: IdentificationData, current: np.ndarray,
     return np.array(rows, float)
 
 
-def _worsened(before: Mapping[str, float], after: Mapping[str, float],
+def worsened(before: Mapping[str, float], after: Mapping[str, float],
               per_output: np.ndarray) -> list[str]:
     """The outputs an effect makes worse on the validation run beyond chance.
 
