@@ -4,7 +4,8 @@
 :func:`try_candidate` builds the :class:`~panto.identification.diagnosis.augmentations.
 AugmentedStructure`, refits it on the training run (:func:`refit`: the effect's own parameters
 first with the nominal held, then everything; once more from the effect's neutral values when the
-ranked start ends below the model it extends; for an effect inside the dynamics once more from the
+ranked start ends below the model it extends; when rejected, for an effect inside the dynamics, or
+a linear one adding dynamics the adequacy's black box shows missing, once more from the
 structure's defaults, the lower training cost kept), simulates it on the validation run and judges
 it (:func:`~panto.identification.diagnosis.support.judge_trial`; a nonlinear effect must also
 validate better than the adequacy's linear black box, :func:`linear_explains`). The round's trials
@@ -21,11 +22,19 @@ import numpy as np
 from panto.identification.diagnosis.augmentations import (INSIDE, AugmentedStructure,
                                                           describe_augmentation)
 from panto.identification.diagnosis.effects import NONLINEAR_EFFECTS, SignalRoles
-from panto.identification.diagnosis.nominal import Progress, simulate
+from panto.identification.diagnosis.nominal import Progress, fit_per_output, simulate
 from panto.identification.diagnosis.support import IMPROVEMENT_FLOOR, Refit, judge_trial
 from panto.identification.estimation.base import (IdentificationData, IdentificationError,
                                                   ModelStructure)
 from panto.identification.estimation.least_squares import fit_least_squares
+
+
+#: Linear effects that add dynamics (a state, a delay, a mode, a mass in the sensor path).
+ADDS_DYNAMICS = ("actuator_lag", "input_delay", "sensor_inertia", "extra_mode")
+#: Validation fit points by which the adequacy's linear black box must beat the current model on
+#: some output before a rejected :data:`ADDS_DYNAMICS` refit gets a second start (the 2-point
+#: relevance of a strong effect in the independent families).
+LINEAR_SHORTFALL = 2.0
 
 
 @dataclass(frozen=True)
@@ -106,11 +115,12 @@ def try_candidate(model: Model, candidate: Mapping[str, Any], current: np.ndarra
             simulated = _finite_run(new, validation, search.validation_shift)
         trial = judge_trial(candidate, Refit(structure, result, simulated), model, train,
                             validation, current, search.options.folds)
-        if not trial["accepted"] and effect in INSIDE:
+        if not trial["accepted"] and _second_start_due(effect, search, current):
             # an effect inside the dynamics (contact loss, friction, a hardening spring) bends
             # the nominal fitted without it far from its own optimum (a flying head fitted with
-            # a bilateral contact); the refit from there can stop short: once more from the
-            # structure's defaults, the better training cost kept
+            # a bilateral contact), and so does a linear one that adds dynamics while a linear
+            # black box shows them missing; the refit from there can stop short: once more from
+            # the structure's defaults, the better training cost kept
             trial, result, new, simulated = _second_start(
                 candidate, structure, model, free, (trial, result, new, simulated), current,
                 search)
@@ -141,6 +151,21 @@ def _finite_run(model: Model, validation: IdentificationData,
                                   f"{validation.time[bad[0]]:.4g} s, {bad.size} of "
                                   f"{len(simulated)} samples")
     return simulated
+
+
+def _second_start_due(effect: str, search: Search, current: np.ndarray) -> bool:
+    """Whether a rejected refit of `effect` gets a second start from the structure's defaults:
+    an effect inside the dynamics always; a linear one that adds dynamics
+    (:data:`ADDS_DYNAMICS`) when the adequacy's linear black box validates better than the
+    current model (`current`: its free run on the validation run) by :data:`LINEAR_SHORTFALL`
+    points on some output (the linear dynamics are not expressed yet)."""
+    if effect in INSIDE:
+        return True
+    if effect not in ADDS_DYNAMICS or search.linear_level is None:
+        return False
+    fits = fit_per_output(search.validation, current)
+    return any(level - fits[o] > LINEAR_SHORTFALL for o, level in search.linear_level.items()
+               if o in fits)
 
 
 def _second_start(candidate: Mapping[str, Any], structure: AugmentedStructure, model: Model,
