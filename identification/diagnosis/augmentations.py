@@ -514,15 +514,14 @@ def stick_slip_run(structure: Any, parameters: Mapping[str, float], data: Identi
     column = model.gamma0[:, list(structure.input_names).index(input_name)]
     joint = len(model.x_start) // 2  # states (q, q'): the velocity of the first coordinate
     gain = float(column[joint])
-    x = model.x_start
-    states = np.empty((len(model.du), len(x)))
-    states[0] = x
+    states = np.empty((len(model.du), len(model.x_start)))
+    states[0], states[1:] = model.x_start, model.drive
+    rows, product, kick = list(states), np.empty(states.shape[1]), np.empty(states.shape[1])
     with np.errstate(over="ignore", invalid="ignore"):
-        for k in range(len(model.drive)):
-            free = model.phi @ x + model.drive[k]
-            f = -free[joint] / gain if gain != 0.0 else 0.0
-            x = free + column * min(level, max(-level, f))
-            states[k + 1] = x
+        for x, row in zip(rows, rows[1:]):  # row: drive[k] + Phi x[k] (free), then + friction
+            np.add(row, np.matmul(model.phi, x, out=product), out=row)
+            f = -float(row[joint]) / gain if gain != 0.0 else 0.0
+            np.add(row, np.multiply(column, min(level, max(-level, f)), out=kick), out=row)
     return model.outputs(states, f"{structure.name} with friction")
 
 

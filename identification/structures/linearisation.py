@@ -27,7 +27,9 @@ def static_functions() -> dict[str, Callable]:
 
     Returns ``deps(p, q) -> [phi2, phi3]``, ``reach(p, q) -> discriminant`` (>= 0 where the
     linkage closes), ``height(p, q, deps) -> y_cb``, ``balance(p, q, u, deps) -> (r, dr/dq)`` and
-    ``linear(p, q, u, deps) -> (M, dr/dv, dr/du, h, dh/dq, dh/dv, dh/du)``, all at ``v = 0``.
+    ``linear(p, q, u, deps) -> (M, dr/dv, dr/du, h, dh/dq, dh/dv, dh/du)``, all at ``v = 0``,
+    and ``static_parameters``: the indices into ``p`` of the parameters the equilibrium depends
+    on (those in ``r``, ``dr/dq``, the linkage and ``y_cb`` at rest; not the dampings).
     """
     import sympy as sp
 
@@ -51,7 +53,11 @@ def static_functions() -> dict[str, Callable]:
                     model.p, model.q, sp.Symbol("phi2_value", real=True))
     drdq = model.total_jacobian(forces)
     drdv = model.forces.jacobian(model.v).subs(rest)
+    statics = set().union(*(sp.sympify(e).free_symbols for e in (
+        forces, drdq, kin["phi2_expr"], kin["phi3_expr"], model.guards[0].expression,
+        model.extra["y_cb"])))
     return {
+        "static_parameters": tuple(i for i, s in enumerate(model.p) if s in statics),
         "phi2": phi2, "phi3": phi3,
         "reach": compile_(model.guards[0].expression, model.p, model.q),
         "height": compile_(model.extra["y_cb"], model.p, model.q, deps),
@@ -146,8 +152,7 @@ def linearise(p: np.ndarray, u0: Sequence[float], start: np.ndarray | None = Non
     ``dM/dq a`` term of the general Jacobian vanishes because ``a = 0`` at rest);
     ``C = [dh/dq, dh/dv]``, ``D = dh/du``; outputs in the order ``(y_cb, xi, F_c)``.
     """
-    q0 = solve_equilibrium(p, u0, start)
-    _, drdq = _balance(p, q0, u0)
+    q0, drdq = _equilibrium(p, u0, start)
     mass, drdv, drdu, h, dhdq, dhdv, dhdu = (
         np.array(a, float) for a in static_functions()["linear"](p, q0, u0, linkage_angles(p, q0)))
     n = len(q0)
@@ -158,6 +163,32 @@ def linearise(p: np.ndarray, u0: Sequence[float], start: np.ndarray | None = Non
     b = np.zeros((2 * n, drdu.shape[1]))
     b[n:] = solved[:, 2 * n:]
     return a, b, np.hstack([dhdq, dhdv]), dhdu, np.concatenate([q0, np.zeros(n)]), h.ravel()
+
+
+#: Recent equilibria of :func:`linearise` by what they depend on (:func:`_equilibrium`).
+_EQUILIBRIA: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
+_EQUILIBRIA_KEPT = 64
+
+
+def _equilibrium(p: np.ndarray, u0: Sequence[float], start: np.ndarray | None
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """``q0 = solve_equilibrium(p, u0, start)`` and ``dr/dq`` there, remembered for the last
+    :data:`_EQUILIBRIA_KEPT` keys of the parameters the equilibrium depends on
+    (``static_parameters``): a finite-difference column in a damping reuses its base point's
+    equilibrium, bit for bit the one computed afresh (every operation of the solve is the same)."""
+    key = (np.asarray(p, float)[list(static_functions()["static_parameters"])].tobytes(),
+           np.asarray(u0, float).tobytes(),
+           None if start is None else np.asarray(start, float).tobytes())
+    found = _EQUILIBRIA.pop(key, None)
+    if found is None:
+        q0 = solve_equilibrium(p, u0, start)
+        found = (q0, _balance(p, q0, u0)[1])
+        for array in found:
+            array.setflags(write=False)
+        while len(_EQUILIBRIA) >= _EQUILIBRIA_KEPT:
+            _EQUILIBRIA.pop(next(iter(_EQUILIBRIA)))
+    _EQUILIBRIA[key] = found  # most recent last
+    return found
 
 
 @lru_cache(maxsize=1)
