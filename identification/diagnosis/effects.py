@@ -157,7 +157,10 @@ def _centred(x: np.ndarray) -> np.ndarray:
     return x - np.median(x)
 
 
-def _friction(v: np.ndarray, options: RegressorOptions) -> dict[str, Regressor]:
+def friction_regressors(v: np.ndarray, options: RegressorOptions = RegressorOptions()
+                        ) -> dict[str, Regressor]:
+    """``sign(v)`` and ``tanh(v / v_s)`` variants of a velocity `v` [m/s] (``v_s`` relative to its
+    spread)."""
     scale = float(np.std(v)) or 1.0
     out = {}
     for w in options.friction_widths:
@@ -321,7 +324,7 @@ def build_candidate_regressors(signals: Mapping[str, np.ndarray], sample_period:
         differentiate(position, dt, cutoff=cutoff) if position is not None else None)
     out: dict[str, dict[str, Regressor]] = {"offset": {"constant": (np.ones(n), {})}}
     if velocity is not None:
-        out["coulomb_friction"] = _friction(velocity, options)
+        out["coulomb_friction"] = friction_regressors(velocity, options)
         if position is not None:
             out["coulomb_friction"].update(_presliding(position, options))
     if position is not None:

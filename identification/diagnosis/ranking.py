@@ -15,7 +15,10 @@ import numpy as np
 from panto.identification.diagnosis.augmentations import INPUT_SIDE, equivalent_input
 from panto.identification.estimation.base import IdentificationData, IdentificationError, ModelStructure
 from panto.identification.diagnosis.support import residuals, sensitivities
+from panto.identification.structures.oscillators import (OUTPUT_NAMES, OscillatorStructure,
+                                                       discretise, propagate)
 from panto.identification.diagnosis.effects import (SignalRoles, build_candidate_regressors, filter_sensitivity,
+                                    friction_regressors,
                                     name_signals, rank_effects, sensor_acceleration,
                                     sensor_signal)
 
@@ -67,6 +70,10 @@ def rank_candidates(model: Any, train: IdentificationData, roles: SignalRoles,
     drive = next((a for a in roles.actuators if a in train.input_names), train.input_names[0])
     paths = {} if _output_filter(model.structure, model.parameters, train.output_names[0],
                                  drive) else input_paths(model, train, regressors, y_hat)
+    if "coulomb_friction" in regressors:
+        on_masses, mass_paths = mass_friction(model, train)
+        regressors["coulomb_friction"] = {**regressors["coulomb_friction"], **on_masses}
+        paths.update(mass_paths)
     best: dict[str, dict[str, Any]] = {}
     total: dict[str, float] = {}
     per_output = {}
@@ -149,6 +156,38 @@ def _candidate(context: _Context, ranked: _OutputRanking, key: str, score: Any) 
         setting["input_scale"] = float(np.std(context.train.input(through))) or 1.0
     return {"effect": score.effect, "variant": score.variant, "err": float(score.err),
             "significant": bool(score.significant), "output": ranked.output, "setting": setting}
+
+
+def mass_friction(model: Any, train: IdentificationData
+                  ) -> tuple[dict[str, tuple[np.ndarray, dict]], dict[tuple[str, str], np.ndarray]]:
+    """Friction on each mass of an oscillator nominal (the inside form fits one on every mass):
+    the regressors ``sign(v_i)``, ``tanh(v_i / v_s)`` of the nominal's own simulated velocity of
+    mass ``i`` and their paths to the outputs, the response of the nominal's linear dynamics to
+    that force on mass ``i`` (exact for inputs linear between samples). The measured position's
+    velocity is mass ``n-1``'s on a three-mass oscillator (``y_cb``), not the frame's, and a
+    force on a mass reaches the outputs only through the dynamics. Empty for other nominals."""
+    inner = _innermost(model.structure)
+    if not isinstance(inner, OscillatorStructure) or inner.friction:
+        return {}, {}
+    values = {k: v for k, v in model.parameters.items() if k in inner.parameter_names}
+    try:
+        states = inner.states(values, train)
+        a, _, c, _ = inner.matrices(values)
+        masses = [inner.values(values)[f"m{i + 1}"] for i in range(inner.masses)]
+    except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError):
+        return {}, {}
+    n, rows = inner.masses, [OUTPUT_NAMES.index(o) for o in train.output_names]
+    regressors, paths = {}, {}
+    for i in range(n):
+        force = np.zeros((2 * n, 1))
+        force[n + i, 0] = 1.0 / masses[i]
+        phi, gamma0, gamma1 = discretise(a, force, train.sample_period, inner.hold)
+        for label, (x, setting) in friction_regressors(states[:, n + i]).items():
+            drive = x[:-1, None] @ gamma0.T + np.diff(x)[:, None] @ gamma1.T
+            key = label.replace("(v", f"(v{i + 1}", 1)
+            regressors[key] = (x, {**setting, "mass": i + 1})
+            paths[("coulomb_friction", key)] = propagate(phi, drive, np.zeros(2 * n)) @ c[rows].T
+    return regressors, paths
 
 
 #: Smallest error-reduction ratio for a candidate to be refitted at all.

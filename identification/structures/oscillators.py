@@ -259,20 +259,31 @@ class OscillatorStructure(ModelStructure):
         u = np.column_stack([data.input(name) for name in INPUT_NAMES] + [np.ones(len(data))])
         return self.simulate_inputs(parameters, u, data.sample_period)
 
-    def simulate_inputs(self, parameters: Mapping[str, float], u: np.ndarray,
-                        period: float) -> np.ndarray:
-        """Free run for input samples ``u`` (columns eta, p, 1) every `period` seconds."""
-        a, b, c, d = self.matrices(parameters)
+    def states(self, parameters: Mapping[str, float], data: IdentificationData) -> np.ndarray:
+        """The free run's states ``[z; z']`` (deflections [m], velocities [m/s], masses from the
+        bottom) on `data`'s inputs, shape ``(len(data), 2 masses)``."""
+        u = np.column_stack([data.input(name) for name in INPUT_NAMES] + [np.ones(len(data))])
+        return self._states(parameters, u, data.sample_period)
+
+    def _states(self, parameters: Mapping[str, float], u: np.ndarray,
+                period: float) -> np.ndarray:
+        a, b, _, _ = self.matrices(parameters)
         v = self.values(parameters)
         x0 = self.equilibrium(parameters, u[0, 0], u[0, 1])
         if self.friction:
             friction = np.array([v[f"F_f{i + 1}"] / v[f"m{i + 1}"] for i in range(self.masses)])
-            states = _simulate_friction(a, b, u, x0, period, self.substeps, self.hold,
-                                        friction, v["v_eps"])
-        else:
-            phi, gamma0, gamma1 = discretise(a, b, period, self.hold)
-            drive = u[:-1] @ gamma0.T + np.diff(u, axis=0) @ gamma1.T
-            states = propagate(phi, drive, x0)
+            return _simulate_friction(a, b, u, x0, period, self.substeps, self.hold,
+                                      friction, v["v_eps"])
+        phi, gamma0, gamma1 = discretise(a, b, period, self.hold)
+        drive = u[:-1] @ gamma0.T + np.diff(u, axis=0) @ gamma1.T
+        return propagate(phi, drive, x0)
+
+    def simulate_inputs(self, parameters: Mapping[str, float], u: np.ndarray,
+                        period: float) -> np.ndarray:
+        """Free run for input samples ``u`` (columns eta, p, 1) every `period` seconds."""
+        _, _, c, d = self.matrices(parameters)
+        v = self.values(parameters)
+        states = self._states(parameters, u, period)
         rows = [OUTPUT_NAMES.index(o) for o in self.output_names]
         y = states @ c[rows].T + u @ d[rows].T
         if not np.all(np.isfinite(y)):
