@@ -141,3 +141,25 @@ def test_input_side_effects_are_separate_candidates_per_input():
     split = _split_per_input(regressors)
     assert set(split) == {"actuator_lag@eta", "actuator_lag@p", "offset"}
     assert set(split["actuator_lag@p"]) == {"lag(p, 0.02 s)", "lag(p, 0.3 s)"}
+
+
+def test_candidates_the_runs_cannot_tell_apart_are_reported_beside_the_chosen_one():
+    """A lag much shorter than the excitation's periods acts like a delay (held-out case 320 of
+    the families: both +3.29 points on the withheld run, dBIC -3613 vs -3607): the delay is
+    chosen (lower dBIC) and the lag reported as equally supported; a dBIC 10 or more apart is
+    strong evidence (Kass & Raftery), and a gain outside the folds' standard error tells them
+    apart on the withheld run."""
+    from panto.identification.diagnosis.pipeline import _alternatives
+
+    folds = 4
+    delay = _trial("input_delay", 3.29, 0.40, -3612.6)
+    lag = _trial("actuator_lag", 3.29, 0.40, -3607.2)
+    mode = _trial("extra_mode", 0.35, 0.14, -121.4)
+    passing = [(t, None, None) for t in (delay, lag, mode)]
+    chosen = _choose(passing, folds)[0]
+    assert chosen.effect == "input_delay"
+    assert _alternatives(chosen, passing, folds) == ("actuator_lag",)
+    far = _trial("actuator_lag", 3.29, 0.40, -3600.0)  # 12.6 apart: strong evidence
+    assert _alternatives(delay, [(delay, None, None), (far, None, None)], folds) == ()
+    weaker = _trial("actuator_lag", 2.9, 0.40, -3610.0)  # 0.39 below, tolerance 0.2
+    assert _alternatives(delay, [(delay, None, None), (weaker, None, None)], folds) == ()

@@ -73,7 +73,7 @@ from panto.identification.diagnosis.residual_analysis import (ErrorModelOptions,
                                                              analyse_residuals)
 from panto.identification.diagnosis.residual_energy import jsonable
 from panto.identification.diagnosis import run_offset
-from panto.identification.diagnosis.support import (NO_GAIN_REASONS, build_structure,
+from panto.identification.diagnosis.support import (BIC_THRESHOLD, NO_GAIN_REASONS, build_structure,
                                                     default_roles, drift_test, effective_samples,
                                                     gap_significance, retuning, settling_time,
                                                     systematic_cost, where_summary)
@@ -98,6 +98,9 @@ class Step:
     """Per output: band edges [Hz] and residual power before/after per band."""
     segments: Mapping[str, Mapping[str, list]]
     """Per output: window start times [s] and residual RMS before/after."""
+    alternatives: tuple[str, ...] = ()
+    """Other candidates the data support as well (:func:`_alternatives`): the withheld gain within
+    the folds' standard error, the training ``dBIC`` within 10 (short of strong evidence)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -312,6 +315,9 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
     fit_after = fit_per_output(validation, current)
     where = where_summary(analysis_before, validation)
     summary = _summary(verdict, accepted, fit_before, fit_after, where, remaining_gap, gap) + \
+        "".join(f"; the runs cannot tell {s.effect} from {' or '.join(s.alternatives)} (withheld "
+                "gains within the folds' standard error, training dBIC within 10: a run exciting "
+                "where they differ would tell)" for s in steps if s.alternatives) + \
         _training_only_text(_training_only(rounds, accepted))
     hypothesis = _discovery(model, train, validation, executor, progress,
                             adequacy or adequacy_quietly(nominal, result, train)) \
@@ -391,9 +397,12 @@ def _search(model: Model, before: np.ndarray, candidates: Sequence[str], search:
             say("diagnose: no candidate passes on the withheld data; stop")
             break
         trial, new_model, simulated = _choose(passing, options.folds)
-        steps.append(_step(trial, validation, current, simulated))
+        alternatives = _alternatives(trial, passing, options.folds)
+        steps.append(dataclasses.replace(_step(trial, validation, current, simulated),
+                                         alternatives=alternatives))
         accepted.append(trial.effect)
-        say(f"diagnose: accepted {trial.effect}: validation fit " + _fits(trial.fit_validation))
+        say(f"diagnose: accepted {trial.effect}: validation fit " + _fits(trial.fit_validation)
+            + (f"; the data support {', '.join(alternatives)} as well" if alternatives else ""))
         if trial.variant == run_offset.VARIANT:  # a property of the withheld run: kept for
             shift = simulated - current               # every later free run on it
             if search.validation_shift is not None:
@@ -544,6 +553,20 @@ def _choose(passing: Sequence[tuple[Trial, Model, np.ndarray]], folds: int
         else 0.0
     close = [t for t in passing if t[0].improvement >= best.improvement - tolerance]
     return min(close, key=lambda t: t[0].delta_bic)
+
+
+def _alternatives(chosen: Trial, passing: Sequence[tuple[Trial, Model, np.ndarray]],
+                  folds: int) -> tuple[str, ...]:
+    """The other passing candidates the runs cannot tell from `chosen`: a withheld gain within
+    the chosen one's fold standard error (:func:`_choose`) and a training ``dBIC`` less than 10
+    away (Kass & Raftery 1995: below 10 the evidence for one over the other is not strong). A
+    lag much shorter than the excitation's periods acts like a delay: on such a run both are
+    named, the diagnosis' first (the lower ``dBIC``) and the other as equally supported."""
+    tolerance = chosen.fold_spread / math.sqrt(max(folds, 1)) \
+        if math.isfinite(chosen.fold_spread) else 0.0
+    return tuple(t.effect for t, _, _ in passing
+                 if t.effect != chosen.effect and t.improvement >= chosen.improvement - tolerance
+                 and abs(t.delta_bic - chosen.delta_bic) < -BIC_THRESHOLD)
 
 
 def _step(trial: Trial, data: IdentificationData, before: np.ndarray, after: np.ndarray) -> Step:
