@@ -17,6 +17,9 @@ Formulas (the diagnosis reference, ``identification_and_diagnosis.md``):
   :func:`fold_improvements`), taken as the standard error of their mean
   (``std_k / sqrt(K)``): the raw standard deviation would reject real effects on non-stationary
   validation runs (the Silverbox "arrow" grows in amplitude, so an effect helps most at its end);
+  or, for a gain in one part of the run (which the folds' test cannot pass: with the whole gain in
+  one of ``K`` folds their mean equals their standard error), the candidate's change explains the
+  withheld residual with ``t > 3`` (:func:`withheld_t`);
 - no output's validation fit worse by more than ``t_{0.975,K-1}`` of its own fold standard error
   (and :data:`WORSENING_FLOOR` points): the cause of a gap does not trade one output's fit for
   another's (:func:`worsened`);
@@ -284,15 +287,47 @@ def judge_trial(candidate: Mapping[str, Any], refit: Refit, model: Any,
     if not best >= IMPROVEMENT_FLOOR:
         failed.append(f"{NO_GAIN_REASONS[0]} by {IMPROVEMENT_FLOOR:g} points "
                       f"(best {best:.2f})")
-    if not (improvement > standard_error and improvement > 0):
+    local = withheld_t(validation, current, refit.simulated)
+    if not (improvement > 0 and (improvement > standard_error or max(local.values()) > LOCAL_T)):
         failed.append(f"{NO_GAIN_REASONS[1]} {improvement:.2f} not above the folds' standard "
-                      f"error {standard_error:.2f}")
+                      f"error {standard_error:.2f}, and its change explains the withheld "
+                      f"residual with t = {max(local.values()):.1f} <= {LOCAL_T:g}")
     return {"effect": effect, "variant": candidate["variant"], "err": candidate["err"],
             "description": effect, "parameters": own, "std": std, "significance": significance,
             "delta_bic": delta_bic, "improvement": improvement,
             "fold_improvements": tuple(per_fold), "fold_spread": spread,
             "fit_train": dict(result.fit), "fit_validation": fit_after, "accepted": not failed,
             "failed": tuple(failed), "message": result.message}
+
+
+def withheld_t(validation: IdentificationData, current: np.ndarray,
+               simulated: np.ndarray) -> dict[str, float]:
+    """Per output: the t statistic of the candidate's change ``d = simulated - current`` as a
+    regressor of the current model's withheld residual ``e = y - current``,
+    ``<e, d> / (sigma ||d||) sqrt(N_eff / N)`` with ``sigma`` and ``N_eff`` from ``e - d`` (the
+    residual the candidate leaves). Where the change acts does not matter: an effect that shows in
+    one part of the withheld run only (a chirp passing a mode, a ramp losing contact) puts its
+    whole gain into one fold, and the folds' mean then equals their standard error whatever the
+    gain (:data:`LOCAL_T`)."""
+    out = {}
+    for j, name in enumerate(validation.output_names):
+        ok = np.isfinite(validation.outputs[:, j]) & np.isfinite(simulated[:, j])
+        e = validation.outputs[ok, j] - current[ok, j]
+        d = simulated[ok, j] - current[ok, j]
+        rest = e - d
+        size, spread = float(np.linalg.norm(d)), float(np.std(rest))
+        if not (size > 0 and spread > 0 and len(rest) > 10):
+            out[name] = 0.0
+            continue
+        scale = math.sqrt(effective_samples(rest) / len(rest))
+        out[name] = float(np.dot(e, d) / (spread * size) * scale)
+    return out
+
+
+#: A candidate whose whole-run gain is positive passes the withheld-gain test when its change
+#: explains the withheld residual with this t (:func:`withheld_t`), even where the gain sits in
+#: one fold; the same 3 as the parameters' significance.
+LOCAL_T = SIGNIFICANCE
 
 
 def _delta_bic(model: Any, refit: Refit, train: IdentificationData) -> tuple[float, list[float]]:
