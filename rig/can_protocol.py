@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from copy import deepcopy
 from dataclasses import dataclass
 from enum import IntEnum, IntFlag
 from functools import lru_cache
@@ -232,6 +233,114 @@ def position_to_raw(position: float, what: str = "position") -> int:
     return raw
 
 
+class Frame(can.Message):
+    """A :class:`can.Message` whose deep copy is cheap (same fields, a fresh data bytearray).
+
+    python-can's virtual bus deep-copies every frame for every receiver; the generic
+    ``copy.deepcopy`` of the data bytearray costs most of a frame's trip through the bus.
+    """
+
+    __slots__ = ()
+
+    def __deepcopy__(self, memo: dict[int, object] | None) -> Frame:
+        channel = self.channel
+        return Frame(timestamp=self.timestamp, arbitration_id=self.arbitration_id,
+                     is_extended_id=self.is_extended_id, is_remote_frame=self.is_remote_frame,
+                     is_error_frame=self.is_error_frame,
+                     channel=channel if channel is None or isinstance(channel, (str, int))
+                     else deepcopy(channel, memo),
+                     dlc=self.dlc, data=bytearray(self.data), is_fd=self.is_fd, is_rx=self.is_rx,
+                     bitrate_switch=self.bitrate_switch,
+                     error_state_indicator=self.error_state_indicator)
+
+
+@lru_cache(maxsize=128)
+def _frame_ids(node_id: int) -> FrameIds:
+    return FrameIds.for_node(node_id)
+
+
+class _IntelCodec:
+    """Encoder/decoder of one DBC message whose signals are all little-endian integers (the
+    linear motor's frames), exactly as cantools does it (same conversions, same strict range
+    check) but without its per-call generality. Anything unusual (a missing or foreign signal,
+    a choice name, a value out of range) returns None: the caller then asks cantools, which
+    encodes it or raises its own error."""
+
+    def __init__(self, message) -> None:
+        self.length = message.length
+        self.names = frozenset(signal.name for signal in message.signals)
+        self.signals = tuple(
+            (signal.name, signal.start, signal.length, signal.is_signed, signal.conversion,
+             -math.inf if signal.minimum is None
+             else signal.minimum - abs(signal.conversion.scale) * 1e-6,
+             math.inf if signal.maximum is None
+             else signal.maximum + abs(signal.conversion.scale) * 1e-6)
+            for signal in message.signals)
+
+    @classmethod
+    def applies_to(cls, message) -> bool:
+        """True if every signal of `message` is a little-endian integer and nothing multiplexes."""
+        return not message.is_multiplexed() and all(
+            signal.byte_order == "little_endian" and not signal.is_float
+            and not signal.conversion.is_float for signal in message.signals)
+
+    def encode(self, values: Mapping[str, float]) -> bytes | None:
+        """The data bytes, or None when cantools must decide."""
+        if len(values) != len(self.names) or not self.names.issuperset(values):
+            return None
+        word = 0
+        for name, start, length, signed, conversion, low, high in self.signals:
+            value = values[name]
+            if not isinstance(value, (int, float)) or not low <= value <= high:
+                return None
+            raw = conversion.numeric_scaled_to_raw(value)
+            top = 1 << (length - 1 if signed else length)
+            if not (-top if signed else 0) <= raw < top:
+                return None
+            word |= (raw & ((1 << length) - 1)) << start
+        return word.to_bytes(self.length, "little")
+
+    def decode(self, data: bytes) -> dict[str, float]:
+        """The physical signal values of `data` (``len(data) == self.length``)."""
+        word = int.from_bytes(data, "little")
+        decoded = {}
+        for name, start, length, signed, conversion, _, _ in self.signals:
+            raw = (word >> start) & ((1 << length) - 1)
+            if signed and raw >> (length - 1):
+                raw -= 1 << length
+            decoded[name] = conversion.raw_to_scaled(raw, False)
+        return decoded
+
+
+@lru_cache(maxsize=None)
+def _codec(name: str) -> _IntelCodec | None:
+    message = load_database().get_message_by_name(name)
+    return _IntelCodec(message) if _IntelCodec.applies_to(message) else None
+
+
+@lru_cache(maxsize=4096)
+def _encoded(name: str, items: tuple[tuple[str, float], ...]) -> bytes:
+    """The DBC data bytes of `name` with the signal values `items` (a pure function, so the
+    frames that repeat - SYNC, NMT, an unchanged TxPDO3 - are encoded once)."""
+    values = dict(items)
+    codec = _codec(name)
+    data = codec.encode(values) if codec is not None else None
+    if data is None:
+        data = load_database().get_message_by_name(name).encode(values, scaling=True,
+                                                                 strict=True)
+    return data
+
+
+@lru_cache(maxsize=4096)
+def _decoded(name: str, data: bytes) -> dict[str, float]:
+    """The signal values of `name`'s data bytes (pure; callers receive a copy)."""
+    codec = _codec(name)
+    if codec is not None:
+        return codec.decode(data)
+    return load_database().get_message_by_name(name).decode(data, decode_choices=False,
+                                                            scaling=True)
+
+
 def encode_frame(name: str, values: Mapping[str, float] | None = None, *,
                  node_id: int = DEFAULT_NODE_ID) -> can.Message:
     """Encode the DBC message `name` for `node_id` into a python-can message.
@@ -239,16 +348,24 @@ def encode_frame(name: str, values: Mapping[str, float] | None = None, *,
     `values` maps signal names to physical values (positions in m, current in A). Missing or
     out-of-range signals raise ValueError naming the message.
     """
-    ids = FrameIds.for_node(node_id)
+    ids = _frame_ids(node_id)
     identifier = _ids_by_name(ids).get(name)
     if identifier is None:
         raise ValueError(f"unknown frame {name!r}; known: {sorted(_names_by_id(ids).values())}")
-    message = load_database().get_message_by_name(name)
     try:
-        data = message.encode(dict(values or {}), scaling=True, strict=True)
+        items = tuple(values.items()) if values else ()
+        hash(items)
+    except TypeError:  # unhashable values: encode without the cache
+        items = None
+    try:
+        if items is None:
+            data = load_database().get_message_by_name(name).encode(
+                dict(values or {}), scaling=True, strict=True)
+        else:
+            data = _encoded(name, items)
     except Exception as error:  # cantools raises EncodeError / KeyError with terse texts
         raise ValueError(f"cannot encode {name} with {dict(values or {})}: {error}") from None
-    return can.Message(arbitration_id=identifier, data=data, is_extended_id=False)
+    return Frame(arbitration_id=identifier, data=data, is_extended_id=False)
 
 
 def decode_frame(frame: can.Message, *, node_id: int = DEFAULT_NODE_ID
@@ -260,14 +377,14 @@ def decode_frame(frame: can.Message, *, node_id: int = DEFAULT_NODE_ID
     """
     if frame.is_extended_id or frame.is_remote_frame or frame.is_error_frame:
         return None
-    name = FrameIds.for_node(node_id).message_name(frame.arbitration_id)
+    name = _frame_ids(node_id).message_name(frame.arbitration_id)
     if name is None:
         return None
     message = load_database().get_message_by_name(name)
     if len(frame.data) != message.length:
         raise ValueError(f"frame 0x{frame.arbitration_id:03X} ({name}) has {len(frame.data)} "
                          f"data bytes, expected {message.length}")
-    return name, message.decode(bytes(frame.data), decode_choices=False, scaling=True)
+    return name, dict(_decoded(name, bytes(frame.data)))
 
 
 def nmt_frame(command: NmtCommand, node_id: int = DEFAULT_NODE_ID) -> can.Message:

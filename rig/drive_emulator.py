@@ -89,6 +89,10 @@ from panto.rig.clock import Clock
 Listener = Callable[[float, float, float], object]
 _OPERATION, _ERROR, _QUICK_STOP = (MainState.OPERATION_ENABLED, MainState.ERROR,
                                    MainState.QUICK_STOP)
+_HOMED, _OPERATION_ENABLED_BIT, _ERROR_BIT, _WARNING_BIT, _IN_TARGET_BIT, _MOTION_ACTIVE_BIT = (
+    int(StatusWord.HOMED), int(StatusWord.OPERATION_ENABLED), int(StatusWord.ERROR),
+    int(StatusWord.WARNING), int(StatusWord.IN_TARGET_POSITION), int(StatusWord.MOTION_ACTIVE))
+_POSITION_LAG_BIT = int(WarnWord.POSITION_LAG)
 
 
 @dataclass(frozen=True)
@@ -292,6 +296,8 @@ class DriveEmulator:
             raise ValueError(f"initial_position {x0} m is outside the travel {self._p.travel}")
         self._h = self._p.internal_step
         self._gains = self._p.loop_gains
+        self._loop_constants = (self._p.moving_mass, self._p.peak_force, *self._p.travel,
+                                *self._gains)
         self._ratio = round(self._p.listener_period / self._h)
         self._t0, self._steps = clock.now(), 0
         self._x, self._v, self._z, self._force, self._lag = x0, 0.0, 0.0, 0.0, 0.0
@@ -526,10 +532,12 @@ class DriveEmulator:
             self._step()
 
     def _step(self) -> None:
-        t, h = self.time, self._h
-        if (self._state == _OPERATION and self._stream is not None
-                and t + h > self._stream.available_until + 1e-9 * h):
-            self._fault(ErrorCode.BUFFER_UNDERFLOW)
+        h = self._h
+        t = self._t0 + self._steps * h  # self.time, inline: 1.5 million steps per 380 s
+        if self._state == _OPERATION:
+            stream = self._stream
+            if stream is not None and t + h > stream.available_until + 1e-9 * h:
+                self._fault(ErrorCode.BUFFER_UNDERFLOW)
         if self._state == _OPERATION:
             self._controlled_step(t, h)
         elif self._v != 0.0:
@@ -538,60 +546,81 @@ class DriveEmulator:
         if self._state == _QUICK_STOP and self._v == 0.0 and self._fault_pending is not None:
             self._enter_error(self._fault_pending)
         if self._listener is not None and self._steps % self._ratio == 0:
-            self._listener(self.time, self._x, self._v)
+            self._listener(self._t0 + self._steps * h, self._x, self._v)
 
     def _controlled_step(self, t: float, h: float) -> None:
         """One classical Runge-Kutta step of the closed position loop (see the module notes).
 
-        Written out (no nested calls, no tuples): 1.5 million steps per 380 s of rig runs.
+        Written out (no calls): 1.5 million steps per 380 s of rig runs. Each stage: the error
+        e = r - x, the demand m (k_i z + k_p e + k_d (r' - x')), saturated at the peak force, the
+        integrator held while winding up (saturated and pushing the same way as e). The first
+        stage's demand tells the saturation at the step's start; the demand at the step's end
+        gives the reported force, the lag r - x the following-error checks.
         """
-        p = self._p
-        k_i, k_p, k_d = self._gains
-        m, f_max = p.moving_mass, p.peak_force
-        low, high = p.travel
+        m, f_max, low, high, k_i, k_p, k_d = self._loop_constants
         t0, r0, slope = (self._stream.segment(t + 0.5 * h) if self._stream is not None
                          else (t, self._hold, 0.0))
-        load = self._current_load()
+        load = float(self._load_force()) if self._load_force is not None else 0.0
 
-        def rates(time: float, x: float, v: float, z: float) -> tuple[float, float, float]:
-            """(dx/dt, dv/dt, dz/dt) of the loop; the demand saturates at the peak force."""
-            r, r_dot = r0 + slope * (time - t0), slope
-            if r < low:
-                r, r_dot = low, 0.0
-            elif r > high:
-                r, r_dot = high, 0.0
-            e = r - x
-            demand = m * (k_i * z + k_p * e + k_d * (r_dot - v))
-            force = f_max if demand > f_max else -f_max if demand < -f_max else demand
-            if force != demand and (e > 0.0) == (demand > 0.0):  # winding up: integrator held
-                return v, (force + load) / m, 0.0
-            return v, (force + load) / m, e
-
+        # the demand (clipped to the travel) at the step's start, middle and end
+        half, sixth = h / 2, h / 6
+        r_a, r_mid, r_end = (r0 + slope * (t - t0), r0 + slope * (t + half - t0),
+                             r0 + slope * (t + h - t0))
+        v_a = v_mid = v_end = slope
+        if r_a < low:
+            r_a, v_a = low, 0.0
+        elif r_a > high:
+            r_a, v_a = high, 0.0
+        if r_mid < low:
+            r_mid, v_mid = low, 0.0
+        elif r_mid > high:
+            r_mid, v_mid = high, 0.0
+        if r_end < low:
+            r_end, v_end = low, 0.0
+        elif r_end > high:
+            r_end, v_end = high, 0.0
         x, v, z = self._x, self._v, self._z
-        a0, a1, a2 = rates(t, x, v, z)
-        b0, b1, b2 = rates(t + h / 2, x + h / 2 * a0, v + h / 2 * a1, z + h / 2 * a2)
-        c0, c1, c2 = rates(t + h / 2, x + h / 2 * b0, v + h / 2 * b1, z + h / 2 * b2)
-        d0, d1, d2 = rates(t + h, x + h * c0, v + h * c1, z + h * c2)
-        self._x = x + h / 6 * (a0 + 2 * b0 + 2 * c0 + d0)
-        self._v = v + h / 6 * (a1 + 2 * b1 + 2 * c1 + d1)
-        self._z = z + h / 6 * (a2 + 2 * b2 + 2 * c2 + d2)
-        if abs(self._demand(t, x, v, z, t0, r0, slope)) > f_max:  # saturated at the step's start
+        # the four stages, written out (x', v', z'): the force saturates at the peak
+        e = r_a - x
+        demand = m * (k_i * z + k_p * e + k_d * (v_a - v))
+        force = f_max if demand > f_max else -f_max if demand < -f_max else demand
+        if force != demand and (e > 0.0) == (demand > 0.0):  # winding up: integrator held
+            e = 0.0
+        a0, a1, a2 = v, (force + load) / m, e
+        start_demand = demand
+        xs, vs, zs = x + half * a0, v + half * a1, z + half * a2
+        e = r_mid - xs
+        demand = m * (k_i * zs + k_p * e + k_d * (v_mid - vs))
+        force = f_max if demand > f_max else -f_max if demand < -f_max else demand
+        if force != demand and (e > 0.0) == (demand > 0.0):  # winding up: integrator held
+            e = 0.0
+        b0, b1, b2 = vs, (force + load) / m, e
+        xs, vs, zs = x + half * b0, v + half * b1, z + half * b2
+        e = r_mid - xs
+        demand = m * (k_i * zs + k_p * e + k_d * (v_mid - vs))
+        force = f_max if demand > f_max else -f_max if demand < -f_max else demand
+        if force != demand and (e > 0.0) == (demand > 0.0):  # winding up: integrator held
+            e = 0.0
+        c0, c1, c2 = vs, (force + load) / m, e
+        xs, vs, zs = x + h * c0, v + h * c1, z + h * c2
+        e = r_end - xs
+        demand = m * (k_i * zs + k_p * e + k_d * (v_end - vs))
+        force = f_max if demand > f_max else -f_max if demand < -f_max else demand
+        if force != demand and (e > 0.0) == (demand > 0.0):  # winding up: integrator held
+            e = 0.0
+        d0, d1, d2 = vs, (force + load) / m, e
+        self._x = x = x + sixth * (a0 + 2 * b0 + 2 * c0 + d0)
+        self._v = v = v + sixth * (a1 + 2 * b1 + 2 * c1 + d1)
+        self._z = z = z + sixth * (a2 + 2 * b2 + 2 * c2 + d2)
+        if abs(start_demand) > f_max:  # saturated at the step's start
             self.saturated_time += h
-        r_end = self._clip(r0 + slope * (t + h - t0), slope)[0]
-        self._lag = r_end - self._x
-        demand = self._demand(t + h, self._x, self._v, self._z, t0, r0, slope)
+        self._lag = r_end - x
+        demand = m * (k_i * z + k_p * (r_end - x) + k_d * (v_end - v))
         self._force = min(max(demand, -f_max), f_max)
-        self._warn = abs(self._lag) > p.following_error_warning
+        self._warn = abs(self._lag) > self._p.following_error_warning
         self._warned = self._warned or self._warn
-        if abs(self._lag) > p.following_error_limit:
+        if abs(self._lag) > self._p.following_error_limit:
             self._fault(ErrorCode.FOLLOWING_ERROR)
-
-    def _demand(self, time: float, x: float, v: float, z: float, t0: float, r0: float,
-                slope: float) -> float:
-        """The loop's force demand [N] at one instant (before the peak-force limit)."""
-        k_i, k_p, k_d = self._gains
-        r, r_dot = self._clip(r0 + slope * (time - t0), slope)
-        return self._p.moving_mass * (k_i * z + k_p * (r - x) + k_d * (r_dot - v))
 
     def _braking_step(self, h: float) -> None:
         deceleration = self._p.quick_stop_deceleration
@@ -610,17 +639,17 @@ class DriveEmulator:
         operating = state == _OPERATION
         warned, self._warned = self._warned or self._warn, self._warn
         demand = self._reference(now)[0] if operating else x
-        status = StatusWord.HOMED
+        status = _HOMED  # plain ints: an IntFlag's | costs a microsecond
         if operating:
-            status |= StatusWord.OPERATION_ENABLED
+            status |= _OPERATION_ENABLED_BIT
         if state == _ERROR or self._fault_pending is not None:
-            status |= StatusWord.ERROR
+            status |= _ERROR_BIT
         if warned:
-            status |= StatusWord.WARNING
+            status |= _WARNING_BIT
         if abs(demand - x) < self._p.in_target_window:
-            status |= StatusWord.IN_TARGET_POSITION
+            status |= _IN_TARGET_BIT
         if (operating and self._stream is not None) or self._v != 0.0:
-            status |= StatusWord.MOTION_ACTIVE
+            status |= _MOTION_ACTIVE_BIT
         low_byte = (self._echo & 0x0F if operating
                     else self._error_code & 0xFF if state == _ERROR else 0)
         powered = state in (_OPERATION, _QUICK_STOP)
@@ -631,7 +660,7 @@ class DriveEmulator:
                                     "MainState": int(state), "ActualPosition": x}, node_id=node),
             encode_frame("TxPDO2", {"DemandPosition": demand, "DemandCurrent": current},
                          node_id=node),
-            encode_frame("TxPDO3", {"WarnWord": int(WarnWord.POSITION_LAG if warned else 0),
+            encode_frame("TxPDO3", {"WarnWord": _POSITION_LAG_BIT if warned else 0,
                                     "LoggedErrorCode": self._logged_error}, node_id=node),
         )
         for frame in frames:

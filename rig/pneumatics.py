@@ -145,10 +145,18 @@ class ValvePlant:
             raise ValueError(f"voltage = {voltage!r}: must be finite")
         p = self.parameters
         self._applied.append((self.time, float(voltage)))
-        target = float(p.static_pressure(self._delayed_voltage()))
+        target = _static_pressure(p, self._delayed_voltage())
         tau = p.time_constant
         if target < self.pressure and p.vent_time_constant is not None:
             tau = p.vent_time_constant
         self.pressure = target + (self.pressure - target) * math.exp(-dt / tau)
         self.time += dt
         return self.pressure
+
+
+def _static_pressure(p: ValveParameters, voltage: float) -> float:
+    """:meth:`ValveParameters.static_pressure` of one voltage in plain floats (the same IEEE
+    operations as NumPy's scalars, without their per-call cost: 500 calls per second of a run)."""
+    u = min(max(float(voltage), 0.0), p.max_voltage)
+    x = min(max((u - p.dead_band) / (p.saturation_voltage - p.dead_band), 0.0), 1.0)
+    return p.max_pressure * (1.0 - (1.0 - x) ** p.exponent)

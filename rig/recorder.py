@@ -112,6 +112,7 @@ class Recorder:
                       source=str(self.folder))
         self._no_nan = np.array([n in STANDARD_CHANNELS and not STANDARD_CHANNELS[n].allow_nan
                                  for n in self.channels])
+        self._no_nan_index = tuple(int(i) for i in np.flatnonzero(self._no_nan))
         self.metadata = metadata
         self.buffer_rows = max(1, int(buffer_rows))
         self.rows_written = 0
@@ -151,9 +152,9 @@ class Recorder:
         if not (math.isfinite(time) and time > self.last_time):
             raise DatasetError(f"{self.folder}: time {time!r} s is not finite and after the "
                                f"previous row ({self.last_time!r} s)")
-        bad = np.isnan(row) & self._no_nan
-        if np.any(bad):
-            raise DatasetError(f"{self.folder}: channel {self.channels[int(np.argmax(bad))]!r}: "
+        bad = [i for i in self._no_nan_index if row[i] != row[i]]  # NaN where not allowed
+        if bad:
+            raise DatasetError(f"{self.folder}: channel {self.channels[bad[0]]!r}: "
                                f"NaN at t = {time!r} s, not allowed in this channel")
         self._buffer.append(format_csv_row([time, *row]))
         self.last_time = time

@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 from collections import deque
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -292,15 +293,32 @@ def _quantise(value: float, quantum: float) -> float:
 
 def _cross_bar_x(parameters: Mapping[str, float]):
     """x_cb(phi1, delta) of the linkage (eq. 2.13) with the given geometry."""
-    import sympy as sp
-
     from panto.fmu_src.models import default_parameters
-    from panto.fmu_src.pantograph import linkage
 
     values = {**default_parameters("Pantograph").values, **parameters}
+    geometry = tuple((n, type(values[n]).__name__, values[n]) for n in _cross_bar_expression()[1])
+    function = _cross_bar_function(geometry)
+    return lambda phi1, delta: float(function(phi1, delta))
+
+
+@lru_cache(maxsize=1)
+def _cross_bar_expression():
+    """(x_cb with phi2 substituted, names of its geometry symbols): the symbolic part of
+    :func:`_cross_bar_x`, built once per process (it costs 0.4 s)."""
+    from panto.fmu_src.pantograph import linkage
+
     kin = linkage()
     x_cb = kin["x_cb"].subs(kin["phi2"], kin["phi2_expr"])
+    names = tuple(sorted(s.name for s in x_cb.free_symbols if s.name not in ("phi1", "delta")))
+    return x_cb, names, kin["phi1"], kin["delta"]
+
+
+@lru_cache(maxsize=32)
+def _cross_bar_function(geometry: tuple[tuple[str, str, float], ...]):
+    """x_cb(phi1, delta) lambdified for one geometry ``((name, type name, value), ...)``."""
+    import sympy as sp
+
+    x_cb, _, phi1, delta = _cross_bar_expression()
     symbols = {s.name: s for s in x_cb.free_symbols}
-    fixed = {symbols[n]: values[n] for n in symbols if n not in ("phi1", "delta")}
-    function = sp.lambdify((kin["phi1"], kin["delta"]), x_cb.subs(fixed), "math")
-    return lambda phi1, delta: float(function(phi1, delta))
+    fixed = {symbols[n]: value for n, _, value in geometry}
+    return sp.lambdify((phi1, delta), x_cb.subs(fixed), "math")
