@@ -107,9 +107,9 @@ def judge_shift(shift: dict[str, Any], validation: Any, current: np.ndarray,
             "parameters": {key: shift["shift"]}, "std": {key: shift["std"]},
             "significance": significance, "delta_bic": 0.0, "improvement": improvement,
             "fold_improvements": tuple(per_fold), "fold_spread": spread, "fit_train": {},
-            "fit_validation": fit_after, "accepted": not failed,
-            "failed": tuple(failed), "message": f"judged on the withheld run's folds 2..K; removes {100 * share:.0f} % of "
-                       f"{name}'s residual energy there"}
+            "fit_validation": fit_after, "accepted": not failed, "failed": tuple(failed),
+            "message": (f"judged on the withheld run's folds 2..K; removes {100 * share:.0f} % "
+                        f"of {name}'s residual energy there")}
 
 
 __all__ = ["VARIANT", "shifts", "judge_shift"]
