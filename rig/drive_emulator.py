@@ -254,6 +254,29 @@ class SetpointStream:
         return times[k], self._values[k], slope
 
 
+def _within(r: float, slope: float, low: float, high: float) -> tuple[float, float]:
+    """The demand position and velocity clipped to the travel ``[low, high]`` (at rest there)."""
+    if r < low:
+        return low, 0.0
+    if r > high:
+        return high, 0.0
+    return r, slope
+
+
+def _stage(gains: tuple, r: float, v_ref: float, x: float, v: float, z: float
+           ) -> tuple[float, float, float, float]:
+    """One Runge-Kutta stage of the position loop: ``(x', v', z')`` at the state ``(x, v, z)``
+    for the demand ``(r, v_ref)``, and the PID force demand before saturation. The force
+    saturates at the peak; while it winds up against the limit the integrator is held."""
+    m, f_max, k_i, k_p, k_d, load = gains
+    e = r - x
+    demand = m * (k_i * z + k_p * e + k_d * (v_ref - v))
+    force = f_max if demand > f_max else -f_max if demand < -f_max else demand
+    if force != demand and (e > 0.0) == (demand > 0.0):
+        e = 0.0
+    return v, (force + load) / m, e, demand
+
+
 class DriveEmulator:
     """The rig's linear-motor drive, emulated on a python-can bus (see the module notes).
 
@@ -564,51 +587,15 @@ class DriveEmulator:
 
         # the demand (clipped to the travel) at the step's start, middle and end
         half, sixth = h / 2, h / 6
-        r_a, r_mid, r_end = (r0 + slope * (t - t0), r0 + slope * (t + half - t0),
-                             r0 + slope * (t + h - t0))
-        v_a = v_mid = v_end = slope
-        if r_a < low:
-            r_a, v_a = low, 0.0
-        elif r_a > high:
-            r_a, v_a = high, 0.0
-        if r_mid < low:
-            r_mid, v_mid = low, 0.0
-        elif r_mid > high:
-            r_mid, v_mid = high, 0.0
-        if r_end < low:
-            r_end, v_end = low, 0.0
-        elif r_end > high:
-            r_end, v_end = high, 0.0
+        r_a, v_a = _within(r0 + slope * (t - t0), slope, low, high)
+        r_mid, v_mid = _within(r0 + slope * (t + half - t0), slope, low, high)
+        r_end, v_end = _within(r0 + slope * (t + h - t0), slope, low, high)
         x, v, z = self._x, self._v, self._z
-        # the four stages, written out (x', v', z'): the force saturates at the peak
-        e = r_a - x
-        demand = m * (k_i * z + k_p * e + k_d * (v_a - v))
-        force = f_max if demand > f_max else -f_max if demand < -f_max else demand
-        if force != demand and (e > 0.0) == (demand > 0.0):  # winding up: integrator held
-            e = 0.0
-        a0, a1, a2 = v, (force + load) / m, e
-        start_demand = demand
-        xs, vs, zs = x + half * a0, v + half * a1, z + half * a2
-        e = r_mid - xs
-        demand = m * (k_i * zs + k_p * e + k_d * (v_mid - vs))
-        force = f_max if demand > f_max else -f_max if demand < -f_max else demand
-        if force != demand and (e > 0.0) == (demand > 0.0):  # winding up: integrator held
-            e = 0.0
-        b0, b1, b2 = vs, (force + load) / m, e
-        xs, vs, zs = x + half * b0, v + half * b1, z + half * b2
-        e = r_mid - xs
-        demand = m * (k_i * zs + k_p * e + k_d * (v_mid - vs))
-        force = f_max if demand > f_max else -f_max if demand < -f_max else demand
-        if force != demand and (e > 0.0) == (demand > 0.0):  # winding up: integrator held
-            e = 0.0
-        c0, c1, c2 = vs, (force + load) / m, e
-        xs, vs, zs = x + h * c0, v + h * c1, z + h * c2
-        e = r_end - xs
-        demand = m * (k_i * zs + k_p * e + k_d * (v_end - vs))
-        force = f_max if demand > f_max else -f_max if demand < -f_max else demand
-        if force != demand and (e > 0.0) == (demand > 0.0):  # winding up: integrator held
-            e = 0.0
-        d0, d1, d2 = vs, (force + load) / m, e
+        gains = (m, f_max, k_i, k_p, k_d, load)
+        a0, a1, a2, start_demand = _stage(gains, r_a, v_a, x, v, z)
+        b0, b1, b2, _ = _stage(gains, r_mid, v_mid, x + half * a0, v + half * a1, z + half * a2)
+        c0, c1, c2, _ = _stage(gains, r_mid, v_mid, x + half * b0, v + half * b1, z + half * b2)
+        d0, d1, d2, _ = _stage(gains, r_end, v_end, x + h * c0, v + h * c1, z + h * c2)
         self._x = x = x + sixth * (a0 + 2 * b0 + 2 * c0 + d0)
         self._v = v = v + sixth * (a1 + 2 * b1 + 2 * c1 + d1)
         self._z = z = z + sixth * (a2 + 2 * b2 + 2 * c2 + d2)
