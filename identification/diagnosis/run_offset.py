@@ -32,8 +32,7 @@ import numpy as np
 
 from panto.identification.diagnosis.support import (IMPROVEMENT_FLOOR, NO_GAIN_REASONS,
                                                     SIGNIFICANCE, effective_samples,
-                                                    fold_improvements, worsened)
-from panto.identification.estimation.base import fit_percent
+                                                    withheld_gain)
 
 VARIANT = "between runs"
 #: Share of the output's residual energy (outside the first fold) a between-run offset must remove:
@@ -43,11 +42,13 @@ MAIN_PART = 0.5
 
 
 def shifts(validation: Any, current: np.ndarray, folds: int) -> list[dict[str, Any]]:
-    """Per output: the first fold's mean residual ``d`` [output unit], its standard error and the
-    free run with ``d`` added outside the first fold (`current`: the model's free run on the
-    withheld run, shape (N, outputs))."""
+    """Per output: the first fold's mean residual ``d`` [output unit], its standard error, the
+    free run with ``d`` added outside the first fold and that mask (``rest``) (`current`: the
+    model's free run on the withheld run, shape (N, outputs))."""
     y = np.asarray(validation.outputs, float)
+    rest = np.ones(len(y), bool)
     first = np.array_split(np.arange(len(y)), max(1, folds))[0]
+    rest[first] = False
     out = []
     for j, name in enumerate(validation.output_names):
         residual = y[first, j] - current[first, j]
@@ -58,10 +59,9 @@ def shifts(validation: Any, current: np.ndarray, folds: int) -> list[dict[str, A
         spread = float(np.std(residual - d, ddof=1))
         error = spread / math.sqrt(max(effective_samples(residual - d), 1.0))
         shifted = np.array(current, float, copy=True)
-        rest = np.ones(len(y), bool)
-        rest[first] = False
         shifted[rest, j] += d
-        out.append({"output": name, "shift": d, "std": error, "simulated": shifted})
+        out.append({"output": name, "shift": d, "std": error, "simulated": shifted,
+                    "rest": rest})
     return out
 
 
@@ -71,31 +71,23 @@ def judge_shift(shift: dict[str, Any], validation: Any, current: np.ndarray,
     :class:`~panto.identification.diagnosis.refit.Trial`."""
     name, simulated = shift["output"], shift["simulated"]
     y = np.asarray(validation.outputs, float)
-    fit_before = {o: float(fit_percent(y[:, j], current[:, j]))
-                  for j, o in enumerate(validation.output_names)}
-    fit_after = {o: float(fit_percent(y[:, j], simulated[:, j]))
-                 for j, o in enumerate(validation.output_names)}
-    improvement = float(np.mean([fit_after[o] - fit_before[o] for o in fit_before]))
-    per_output = fold_improvements(validation, current, simulated, folds)
-    per_fold = [float(v) for v in np.nanmean(per_output, axis=1)]
-    spread = float(np.std(per_fold, ddof=1)) if len(per_fold) > 1 else 0.0
-    standard_error = spread / math.sqrt(len(per_fold))
+    gain = withheld_gain(validation, current, simulated, folds)
+    fit_after, improvement = gain["fit_after"], gain["improvement"]
+    per_fold, spread, standard_error = gain["per_fold"], gain["spread"], gain["standard_error"]
     significance = abs(shift["shift"]) / shift["std"] if shift["std"] > 0 else math.inf
-    j = list(validation.output_names).index(name)
-    rest = np.ones(len(y), bool)
-    rest[np.array_split(np.arange(len(y)), max(1, folds))[0]] = False
+    j, rest = list(validation.output_names).index(name), shift["rest"]
     before = y[rest, j] - current[rest, j]
     share = 1.0 - float(np.nansum((before - shift["shift"]) ** 2) / np.nansum(before ** 2))
-    failed = worsened(fit_before, fit_after, per_output)
+    failed = gain["failed"]
     if not share >= MAIN_PART:
         failed.append(f"removes {100 * share:.0f} % of {name}'s residual energy outside the "
                       f"first fold (an offset between runs is named only as its main part, "
                       f">= {100 * MAIN_PART:.0f} %)")
     if not significance > SIGNIFICANCE:
         failed.append(f"|theta|/sigma {significance:.2f} <= {SIGNIFICANCE:g}")
-    best = max(fit_after[o] - fit_before[o] for o in fit_before)
-    if not best >= IMPROVEMENT_FLOOR:
-        failed.append(f"{NO_GAIN_REASONS[0]} by {IMPROVEMENT_FLOOR:g} points (best {best:.2f})")
+    if not gain["best"] >= IMPROVEMENT_FLOOR:
+        failed.append(f"{NO_GAIN_REASONS[0]} by {IMPROVEMENT_FLOOR:g} points "
+                      f"(best {gain['best']:.2f})")
     if not (improvement > standard_error and improvement > 0):
         failed.append(f"{NO_GAIN_REASONS[1]} {improvement:.2f} not above the folds' standard "
                       f"error {standard_error:.2f}")

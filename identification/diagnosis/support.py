@@ -270,23 +270,18 @@ def judge_trial(candidate: Mapping[str, Any], refit: Refit, model: Any,
     own = {n: float(result.parameters[n]) for n in structure.effect_parameters}
     std = {n: float(result.std.get(n, math.nan)) * inflation for n in structure.effect_parameters}
     significance = _significance(effect, structure, own, std)
-    fit_before = _fits(validation, current)
-    fit_after = _fits(validation, refit.simulated)
-    improvement = float(np.mean([fit_after[o] - fit_before[o] for o in fit_before]))
-    per_output = fold_improvements(validation, current, refit.simulated, folds)
-    per_fold = [float(v) for v in np.nanmean(per_output, axis=1)]
-    spread = float(np.std(per_fold, ddof=1)) if len(per_fold) > 1 else 0.0
-    standard_error = spread / math.sqrt(len(per_fold))
-    failed = worsened(fit_before, fit_after, per_output)
+    gain = withheld_gain(validation, current, refit.simulated, folds)
+    fit_after, improvement = gain["fit_after"], gain["improvement"]
+    per_fold, spread, standard_error = gain["per_fold"], gain["spread"], gain["standard_error"]
+    failed = gain["failed"]
     threshold = BIC_THRESHOLD if p else SWITCH_BIC
     if not delta_bic < threshold:
         failed.append(f"dBIC {delta_bic:.1f} >= {threshold:g}")
     if not significance > SIGNIFICANCE:
         failed.append(f"|theta|/sigma {significance:.2f} <= {SIGNIFICANCE:g}")
-    best = max(fit_after[o] - fit_before[o] for o in fit_before)
-    if not best >= IMPROVEMENT_FLOOR:
+    if not gain["best"] >= IMPROVEMENT_FLOOR:
         failed.append(f"{NO_GAIN_REASONS[0]} by {IMPROVEMENT_FLOOR:g} points "
-                      f"(best {best:.2f})")
+                      f"(best {gain['best']:.2f})")
     local = withheld_t(validation, current, refit.simulated)
     if not (improvement > 0 and (improvement > standard_error or max(local.values()) > LOCAL_T)):
         failed.append(f"{NO_GAIN_REASONS[1]} {improvement:.2f} not above the folds' standard "
@@ -298,6 +293,24 @@ def judge_trial(candidate: Mapping[str, Any], refit: Refit, model: Any,
             "fold_improvements": tuple(per_fold), "fold_spread": spread,
             "fit_train": dict(result.fit), "fit_validation": fit_after, "accepted": not failed,
             "failed": tuple(failed), "message": result.message}
+
+
+def withheld_gain(validation: IdentificationData, current: np.ndarray, simulated: np.ndarray,
+                  folds: int) -> dict[str, Any]:
+    """What every candidate's withheld-run tests start from (module notes): the free-run fits
+    [%] per output before (`current`) and after (`simulated`), the mean improvement and the best
+    output's, the blocked folds' improvements (per output and mean), their spread and standard
+    error, and the outputs made worse beyond chance (``failed``, :func:`worsened`)."""
+    fit_before, fit_after = _fits(validation, current), _fits(validation, simulated)
+    per_output = fold_improvements(validation, current, simulated, folds)
+    per_fold = [float(v) for v in np.nanmean(per_output, axis=1)]
+    spread = float(np.std(per_fold, ddof=1)) if len(per_fold) > 1 else 0.0
+    return {"fit_before": fit_before, "fit_after": fit_after,
+            "improvement": float(np.mean([fit_after[o] - fit_before[o] for o in fit_before])),
+            "best": max(fit_after[o] - fit_before[o] for o in fit_before),
+            "per_fold": per_fold, "spread": spread,
+            "standard_error": spread / math.sqrt(len(per_fold)),
+            "failed": worsened(fit_before, fit_after, per_output)}
 
 
 def withheld_t(validation: IdentificationData, current: np.ndarray,
