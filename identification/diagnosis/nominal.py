@@ -93,8 +93,7 @@ def adequate_nominal(nominal: ModelStructure, free: Sequence[str], train: Identi
     if progress:
         progress("diagnose: adequacy: " + adequacy.message + "; refitting the nominal globally")
     settings = dataclasses.replace(global_fit or GlobalFitOptions(), starts_executor=pool)
-    budget = {**fit_options, "max_evaluations": GLOBAL_BUDGET * int(
-        fit_options.get("max_evaluations") or 400)}
+    budget = {**fit_options, "max_evaluations": GLOBAL_BUDGET * fit_options["max_evaluations"]}
     result = fit_nominal(nominal, free, train, progress=indented(progress), global_fit=settings,
                          default=None if "global_fit" in result.details else result, **budget)
     return result, check_adequacy(nominal, result, data, reference=adequacy)
