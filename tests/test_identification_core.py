@@ -149,6 +149,21 @@ def test_failures_say_why():
         fit_least_squares(FirstOrder(), data, free=("K",), bounds={"K": (2.0, 1.0)})
 
 
+def test_a_start_rounded_just_beyond_its_bound_is_taken_at_the_bound():
+    # a fit ending at a log-parameterised bound returns exp(ln(bound / start)) times its start,
+    # which rounding can leave an ulp outside: passed on as the next start, it must still fit
+    data, _ = first_order_data()
+    limits = {"K": (0.01, 1.5)}  # the plant's K = 2 lies beyond: the fit ends at the bound
+    first = fit_least_squares(FirstOrder(), data, free=("K", "tau"), bounds=limits)
+    assert first.parameters["K"] == pytest.approx(1.5, rel=1e-9)
+    above = float(np.nextafter(1.5, 2.0))
+    again = fit_least_squares(FirstOrder(), data, free=("K", "tau"), bounds=limits,
+                              initial={"K": above, "tau": first.parameters["tau"]})
+    assert again.parameters["K"] <= 1.5 and again.parameters["K"] == pytest.approx(1.5, rel=1e-9)
+    with pytest.raises(IdentificationError, match="outside its bounds"):
+        fit_least_squares(FirstOrder(), data, free=("K",), bounds=limits, initial={"K": 1.5001})
+
+
 def test_unidentifiable_parameter_is_named():
     """K and a gain that only ever appears as the product K * G: the Fisher information is
     singular along ln K - ln G, and the report says so."""

@@ -367,6 +367,12 @@ def make_problem(structure: ModelStructure, data: IdentificationData, free: Sequ
     lower = np.array([limits[n][0] for n in free], float)
     upper = np.array([limits[n][1] for n in free], float)
     theta0 = np.array([base[n] for n in free], float)
+    # a value a few ulps beyond its bound is at it: a fit's result at a log-parameterised bound
+    # comes back through exp(ln(bound / theta_0)) and is often passed on as the next start
+    theta0 = np.where(np.isclose(theta0, lower, rtol=1e-12, atol=0.0), np.maximum(theta0, lower),
+                      theta0)
+    theta0 = np.where(np.isclose(theta0, upper, rtol=1e-12, atol=0.0), np.minimum(theta0, upper),
+                      theta0)
     for name, lo, hi, value in zip(free, lower, upper, theta0):
         if not lo < hi:
             raise IdentificationError(f"{structure.name}: bounds of {name!r} are [{lo:g}, {hi:g}]: "
