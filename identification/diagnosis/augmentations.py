@@ -510,18 +510,12 @@ def stick_slip_run(structure: Any, parameters: Mapping[str, float], data: Identi
     run's force fit goes from 89.2 % to 93.4 % with the two-pass form and to 96.1 % with this law
     (fitted 0.066 bar, truth 20 / 260 = 0.077 bar); the clean rig gives 98.7 %, the nonlinear
     model with the true torque 97.8 % (the rest is the linearisation)."""
+    from .stick_slip import run_stick_slip  # compiled; the NumPy loop without a compiler
+
     model = structure.discrete_model(parameters, data)
     column = model.gamma0[:, list(structure.input_names).index(input_name)]
     joint = len(model.x_start) // 2  # states (q, q'): the velocity of the first coordinate
-    gain = float(column[joint])
-    states = np.empty((len(model.du), len(model.x_start)))
-    states[0], states[1:] = model.x_start, model.drive
-    rows, product, kick = list(states), np.empty(states.shape[1]), np.empty(states.shape[1])
-    with np.errstate(over="ignore", invalid="ignore"):
-        for x, row in zip(rows, rows[1:]):  # row: drive[k] + Phi x[k] (free), then + friction
-            np.add(row, np.matmul(model.phi, x, out=product), out=row)
-            f = -float(row[joint]) / gain if gain != 0.0 else 0.0
-            np.add(row, np.multiply(column, min(level, max(-level, f)), out=kick), out=row)
+    states = run_stick_slip(model.phi, model.drive, model.x_start, column, joint, level)
     return model.outputs(states, f"{structure.name} with friction")
 
 
