@@ -104,6 +104,11 @@ class RegressorOptions:
     """``v_s / std(v)``; 0 gives ``sign(v)``."""
     dead_zone_widths: tuple[float, ...] = (0.05, 0.1, 0.2, 0.4)
     """``b / max|s~|``."""
+    zone_centres: tuple[float, ...] = (0.1, 0.25, 0.75, 0.9)
+    """Quantile levels of an actuator input where narrow dead zones are tried besides its median
+    and its first sample (an actuator at rest)."""
+    narrow_zone: float = 0.02
+    """``b / max|s~|`` of those narrow zones."""
     max_delay: int = 50
     """Longest delay tried [samples]."""
     n_delays: int = 12
@@ -187,13 +192,23 @@ def _presliding(x: np.ndarray, options: RegressorOptions) -> dict[str, Regressor
 
 def _dead_zones(signals: Mapping[str, np.ndarray], names: Sequence[str],
                 options: RegressorOptions) -> dict[str, Regressor]:
-    """Static dead zone of actuator inputs: ``dz(s~, b) - s~ = -clip(s~, -b, b)``."""
+    """Static dead zone of actuator inputs: ``dz(s~, b) - s~ = -clip(s~, -b, b)`` about the
+    median, and narrow zones (:attr:`RegressorOptions.narrow_zone`) about the first sample and
+    the quantiles :attr:`RegressorOptions.zone_centres`: a zone much narrower than the travel acts
+    like a relay where the input crosses its centre, a signature the median's zones miss when the
+    centre lies elsewhere."""
     out = {}
     for name in names:
         s = _centred(signals[name])
         for w in options.dead_zone_widths:
             b = w * float(np.max(np.abs(s)))
             out[f"dz({name}, {b:.3g})"] = (-np.clip(s, -b, b), {"signal": name, "width": b})
+        u = np.asarray(signals[name], float)
+        b = options.narrow_zone * float(np.max(np.abs(s)))
+        centres = [float(u[0])] + [float(c) for c in np.quantile(u, options.zone_centres)]
+        for c in centres if b > 0 else ():
+            out[f"dz({name} - {c:.4g}, {b:.3g})"] = (-np.clip(u - c, -b, b),
+                                                     {"signal": name, "width": b, "centre": c})
     return out
 
 

@@ -235,7 +235,8 @@ def _setting(score: Any, output: str, coefficient: float, signals: Mapping[str, 
     if score.effect == "dead_zone":  # the input the augmentation transforms (its _input)
         zone = signal if signal in data.input_names else next(
             (a for a in roles.actuators if a in data.input_names), data.input_names[0])
-        setting["centre"] = float(np.median(data.input(zone)))
+        median = float(np.median(data.input(zone)))
+        setting["centre"] = float(score.setting.get("centre", median))
         setting["spread"] = float(np.max(np.abs(data.input(zone) - setting["centre"])))
     if setting["drive"] not in data.input_names and score.effect != "extra_mode":
         setting["drive"] = drive

@@ -206,6 +206,8 @@ def refit(structure: AugmentedStructure, model: Model, train: IdentificationData
                  **{p: starts[p] * factor for p in neutral}}
         start = {k: float(min(max(v, bounds[k][0]), bounds[k][1])) if k in bounds else v
                  for k, v in start.items()}
+        if factor == 1.0:
+            start = located_zone(structure, start, train)
         if own and factor == 1.0 and not from_defaults:
             # staged: the effect's own parameters first, the nominal held where it is (a few
             # well-conditioned unknowns), then everything from there; a joint start from a
@@ -227,6 +229,75 @@ def refit(structure: AugmentedStructure, model: Model, train: IdentificationData
             result = again
     return result, Model(structure, dict(result.parameters), free, dict(result.std),
                           np.asarray(result.covariance, float), dict(result.fit))
+
+
+#: Where :func:`located_zone` looks for a dead zone: the input's quantiles at these levels, each
+#: with these widths (shares of the input's largest distance from its median).
+ZONE_LEVELS = tuple(np.linspace(0.02, 0.98, 25).tolist())
+ZONE_WIDTHS = (0.003, 0.01, 0.03, 0.1)
+#: Refinements of the grid's best centre (13 points over +-1 spacing, the spacing / 6 each time).
+ZONE_ZOOMS = 3
+
+
+def located_zone(structure: AugmentedStructure, start: Mapping[str, float],
+                 train: IdentificationData) -> dict[str, float]:
+    """`start` with a dead zone's centre and width taken from a grid search on the training run.
+
+    A dead zone narrower than the input's travel acts like a relay where the input crosses its
+    centre (``-clip(u - c, -b, b)`` is ``-b sign(u - c)`` away from ``c``): the training cost has a
+    basin about the true centre only as wide as the zone, and from a start outside it (the
+    median, millimetres off a zone of tens of micrometres) the centre has no gradient and the
+    refit drives the width to zero. The grid (:data:`ZONE_LEVELS` x :data:`ZONE_WIDTHS`, 100
+    free runs of the model with the other parameters at `start`), then :data:`ZONE_ZOOMS`
+    finer 1-D grids about its best centre (39 runs), keeps the start itself when nothing on them
+    has a lower training cost. Other effects, and a zone whose centre is not
+    fitted, return `start` unchanged."""
+    centre = next((p for p in structure.effect_parameters if p.endswith(":centre")), None)
+    if structure.effect != "dead_zone" or centre is None:
+        return dict(start)
+    width, signal = centre[:-len(":centre")], centre.split(":")[1]
+    if signal not in train.input_names:
+        return dict(start)
+    u = train.input(signal)
+    median = float(np.median(u))
+    spread = float(np.max(np.abs(u - median)))
+    if not spread > 0:
+        return dict(start)
+    lower, upper = structure.bounds()[centre], structure.bounds()[width]
+    scale = np.nanstd(train.outputs, axis=0)
+    scale = np.where(scale > 0, scale, 1.0)
+
+    def cost(values: Mapping[str, float]) -> float:
+        try:
+            y = np.asarray(structure.simulate(dict(values), train), float)
+        except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError):
+            return math.inf
+        y = y[:, [structure.output_names.index(o) for o in train.output_names]]
+        e = np.where(np.isfinite(train.outputs), train.outputs - y, 0.0) / scale
+        total = float(np.sum(e ** 2))
+        return total if math.isfinite(total) else math.inf
+
+    best, best_cost = dict(start), cost(start)
+    initial_cost = best_cost
+    centres = np.quantile(u, ZONE_LEVELS)
+    for c in centres:
+        for share in ZONE_WIDTHS:
+            trial = {**start, centre: float(min(max(c, lower[0]), lower[1])),
+                     width: float(min(max(share * spread, upper[0]), upper[1]))}
+            value = cost(trial)
+            if value < best_cost:
+                best, best_cost = trial, value
+    # the cost about a narrow zone's centre is V-shaped (the misplaced relay's error grows with
+    # the distance) but flat between samples: zoom in on the best centre, width held
+    step = float(np.max(np.diff(centres))) if len(centres) > 1 else spread
+    for _ in range(ZONE_ZOOMS if best_cost < initial_cost else 0):
+        for c in np.linspace(best[centre] - step, best[centre] + step, 13):
+            trial = {**best, centre: float(min(max(c, lower[0]), lower[1]))}
+            value = cost(trial)
+            if value < best_cost:
+                best, best_cost = trial, value
+        step /= 6.0
+    return best
 
 
 def _below(fit: Mapping[str, float], reference: Mapping[str, float]) -> bool:
@@ -253,4 +324,5 @@ def linear_explains(effect: str, trial: Mapping[str, Any],
     return {"accepted": False, "failed": tuple(trial["failed"]) + (reason,)}
 
 
-__all__ = ["Trial", "Model", "Search", "try_candidate", "refit", "linear_explains"]
+__all__ = ["Trial", "Model", "Search", "try_candidate", "refit", "linear_explains", "located_zone",
+           "ZONE_LEVELS", "ZONE_WIDTHS", "ZONE_ZOOMS"]
