@@ -6,12 +6,15 @@ candidate parameter set (section 4.1.3): static equilibrium by Newton's method, 
 
 The functions of the model at rest are compiled here from the symbolic model with the velocities
 set to zero *before* differentiating (``dr/dq`` at ``v = 0`` has about 1 500 operations instead of
-350 000), once per process (a few seconds). Small linear algebra uses numpy, and the matrix
-exponential is computed here, because scipy's threaded BLAS makes 10 x 10 calls take
-milliseconds on a loaded two-core machine.
+350 000), once per process (a few seconds); their generated Python is translated into C
+(:mod:`~panto.identification.structures.static_kernel`: the same operations, bit for bit the same
+results, 3 us instead of 55 us per balance), the Python kept as fallback. Small linear algebra
+uses numpy, and the matrix exponential is computed here, because scipy's threaded BLAS makes
+10 x 10 calls take milliseconds on a loaded two-core machine.
 """
 from __future__ import annotations
 
+import math
 from functools import lru_cache
 from typing import Callable, Sequence
 
@@ -19,6 +22,7 @@ import numpy as np
 from scipy import optimize
 
 from panto.identification.estimation.base import IdentificationError
+from panto.identification.structures import static_kernel
 
 
 @lru_cache(maxsize=1)
@@ -71,6 +75,18 @@ def static_functions() -> dict[str, Callable]:
     }
 
 
+@lru_cache(maxsize=1)
+def _static_kernel() -> static_kernel.StaticKernel | None:
+    return static_kernel.load(static_functions(), (len(parameter_defaults()[0]), 3, 2))
+
+
+def compiled() -> static_kernel.StaticKernel | None:
+    """The balance and linearisation compiled from :func:`static_functions`, bit for bit the
+    same (:mod:`~panto.identification.structures.static_kernel`), or None (no compiler, or
+    ``PANTO_STATIC_KERNEL=0``): the Python functions run."""
+    return _static_kernel() if static_kernel.switched_on() else None
+
+
 def linkage_angles(p: Sequence[float], q: Sequence[float]) -> list[float]:
     """``[phi2, phi3]`` (Freudenstein solution); raises if the linkage cannot close."""
     f = static_functions()
@@ -81,7 +97,13 @@ def linkage_angles(p: Sequence[float], q: Sequence[float]) -> list[float]:
     return [phi2, f["phi3"](p, q, phi2)]
 
 
-def _balance(p, q, u) -> tuple[np.ndarray, np.ndarray]:
+def _balance(p, q, u, kernel: static_kernel.StaticKernel | None = None
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """``(r, dr/dq)`` at rest: by `kernel` (:func:`compiled`) where given and where it answers,
+    else by the Python functions (which raise where the linkage cannot close)."""
+    found = None if kernel is None else kernel.balance(p, q, u)
+    if found is not None:
+        return found
     r, drdq = static_functions()["balance"](p, q, u, linkage_angles(p, q))
     return np.array(r, float).ravel(), np.array(drdq, float)
 
@@ -104,15 +126,16 @@ def solve_equilibrium(p: np.ndarray, u: Sequence[float], start: np.ndarray | Non
 
 
 def _newton(p, u, q, tolerance: float) -> np.ndarray:
-    r, jac = _balance(p, q, u)
+    kernel = compiled()
+    r, jac = _balance(p, q, u, kernel)
     scale = max(1.0, float(np.max(np.abs(r))), abs(p[INDEX["k_p"]] * u[1]))
     for _ in range(50):
         step = np.linalg.solve(jac, -r)
-        lam, norm = 1.0, np.linalg.norm(r)
+        lam, norm = 1.0, _norm(r)
         while True:  # backtracking keeps the linkage closed and the residual falling
             try:
-                r_new, jac_new = _balance(p, q + lam * step, u)
-                if np.linalg.norm(r_new) < norm or lam < 1e-3:
+                r_new, jac_new = _balance(p, q + lam * step, u, kernel)
+                if _norm(r_new) < norm or lam < 1e-3:
                     break
             except IdentificationError:
                 pass
@@ -120,28 +143,42 @@ def _newton(p, u, q, tolerance: float) -> np.ndarray:
             if lam < 1e-4:
                 raise IdentificationError("Newton step left the admissible configurations")
         q, r, jac = q + lam * step, r_new, jac_new
-        if np.max(np.abs(r)) <= tolerance * scale and np.max(np.abs(lam * step)) < 1e-9:
+        # max |r| <= bound and max |lam step| < 1e-9, element by element (a NaN fails both ways)
+        bound = tolerance * scale
+        if all(abs(x) <= bound for x in r.tolist()) and \
+                all(abs(lam * s) < 1e-9 for s in step.tolist()):
             return q
     raise IdentificationError("Newton's method did not converge to an equilibrium")
+
+
+def _norm(r: np.ndarray) -> float:
+    """``np.linalg.norm(r)`` of a float vector, the same operations (``sqrt(r . r)``) without
+    its dispatch (Newton takes the norm some 650 000 times in one diagnosis)."""
+    return math.sqrt(r.dot(r))
 
 
 def initial_guess(p: np.ndarray, u: Sequence[float]) -> np.ndarray:
     """Cross bar at the wire height (bisection on phi1), ``delta = 0``, head on the wire."""
     from panto.fmu_src.pantograph import PHI1_SEARCH_RANGE
 
-    f = static_functions()
+    f, kernel = static_functions(), compiled()
     low, high = PHI1_SEARCH_RANGE
     grid = np.linspace(low, high, 136)
-    ok = [phi for phi in grid if f["reach"](p, [phi, 0.0, u[0]]) >= 0.0]
+    reach = None if kernel is None else kernel.reach_grid(p, [0.0, 0.0, u[0]], grid)
+    ok = ([phi for phi in grid if f["reach"](p, [phi, 0.0, u[0]]) >= 0.0] if reach is None
+          else list(grid[reach >= 0.0]))
     if not ok:
         raise IdentificationError("the linkage closes for no phi1 in the search range")
-    heights = [f["height"](p, [phi, 0.0, u[0]], linkage_angles(p, [phi, 0.0, u[0]])) - u[0]
-               for phi in (ok[0], ok[-1])]
+
+    def height(phi):
+        found = None if kernel is None else kernel.height(p, [phi, 0.0, u[0]])
+        return (f["height"](p, [phi, 0.0, u[0]], linkage_angles(p, [phi, 0.0, u[0]]))
+                if found is None else found) - u[0]
+
+    heights = [height(phi) for phi in (ok[0], ok[-1])]
     if heights[0] * heights[1] > 0:
         raise IdentificationError(f"no configuration puts the cross bar at {u[0]:.4g} m")
-    phi1 = optimize.brentq(lambda phi: f["height"](p, [phi, 0.0, u[0]],
-                                                   linkage_angles(p, [phi, 0.0, u[0]])) - u[0],
-                           ok[0], ok[-1], xtol=1e-13)
+    phi1 = optimize.brentq(height, ok[0], ok[-1], xtol=1e-13)
     return np.array([phi1, 0.0, u[0]])
 
 
@@ -153,7 +190,9 @@ def linearise(p: np.ndarray, u0: Sequence[float], start: np.ndarray | None = Non
     ``C = [dh/dq, dh/dv]``, ``D = dh/du``; outputs in the order ``(y_cb, xi, F_c)``.
     """
     q0, drdq = _equilibrium(p, u0, start)
-    mass, drdv, drdu, h, dhdq, dhdv, dhdu = (
+    kernel = compiled()
+    found = None if kernel is None else kernel.linear(p, q0, u0)
+    mass, drdv, drdu, h, dhdq, dhdv, dhdu = found if found is not None else (
         np.array(a, float) for a in static_functions()["linear"](p, q0, u0, linkage_angles(p, q0)))
     n = len(q0)
     solved = np.linalg.solve(mass, np.hstack([drdq, drdv, drdu]))  # numpy: no BLAS threads
@@ -182,7 +221,7 @@ def _equilibrium(p: np.ndarray, u0: Sequence[float], start: np.ndarray | None
     found = _EQUILIBRIA.pop(key, None)
     if found is None:
         q0 = solve_equilibrium(p, u0, start)
-        found = (q0, _balance(p, q0, u0)[1])
+        found = (q0, _balance(p, q0, u0, compiled())[1])
         for array in found:
             array.setflags(write=False)
         while len(_EQUILIBRIA) >= _EQUILIBRIA_KEPT:

@@ -1,0 +1,316 @@
+"""The pantograph at rest, compiled: the lambdified static functions of
+:mod:`panto.identification.structures.linearisation` translated operation for operation into C.
+
+Newton's method for the equilibrium calls the balance ``(r, dr/dq)`` at ``v = 0`` with the
+linkage angles some half million times in one rig-story diagnosis, 55-65 us each as SymPy's
+generated Python (a 9 000-character expression of scalars). This module reads that generated
+Python source (:func:`python_to_c`, through :mod:`ast`) and writes the same expressions as C:
+every binary operation with the same operands in the same order, ``x**n`` as libm's ``pow`` (as
+CPython's float power and NumPy's scalar power call it), ``sin``, ``cos``, ``atan2``, ``sqrt``
+from libm, compiled without fused multiply-adds and without builtin substitutions
+(``-ffp-contract=off -fno-builtin``: ``pow(x, 2)`` stays a call, ``sin``/``cos`` never fuse into
+``sincos``). Identical subexpressions are computed once (the same operations give the same value),
+so the results are bit for bit those of the Python functions.
+
+Where the Python functions raise (the linkage cannot close, a math domain error, a division by
+zero) the C results are not finite or the reach test fails: the callers then run the Python
+functions, which raise as before. The library is built at first use by
+:mod:`panto.fmu_src.c_kernels` into the kernel cache (keyed by the hash of the generated source);
+without a compiler, or with ``PANTO_STATIC_KERNEL=0`` (:data:`SWITCH_VARIABLE`), the Python
+functions run.
+"""
+from __future__ import annotations
+
+import ast
+import ctypes
+import inspect
+from typing import Callable, Sequence
+
+import numpy as np
+
+from panto.fmu_src import c_kernels
+
+#: Flags of the build: ISO C, no fused multiply-adds, libm calls kept as written.
+COMPILER_FLAGS = ("-std=c99", "-O2", "-ffp-contract=off", "-fno-builtin")
+#: Environment variable: ``0`` switches the compiled balance off (the Python functions run).
+SWITCH_VARIABLE = "PANTO_STATIC_KERNEL"
+#: libm functions the translation accepts (CPython's ``math`` calls the same ones).
+FUNCTIONS = {"sin", "cos", "tan", "atan2", "sqrt", "exp", "log", "atan", "asin", "acos",
+             "sinh", "cosh", "tanh"}
+_OPERATORS = {ast.Add: "+", ast.Sub: "-", ast.Mult: "*", ast.Div: "/"}
+_COMPARISONS = {ast.Gt: ">", ast.GtE: ">=", ast.Lt: "<", ast.LtE: "<=", ast.Eq: "==",
+                ast.NotEq: "!="}
+
+
+class Untranslatable(ValueError):
+    """The generated Python uses a construct :func:`python_to_c` does not translate."""
+
+
+class _Emitter:
+    """C text of one function body: statements, and repeated subexpressions as temporaries."""
+
+    def __init__(self, prefix: str) -> None:
+        self.prefix, self.lines, self.known = prefix, [], {}
+        self.counts: dict[str, int] = {}
+
+    def count(self, node: ast.AST) -> None:
+        """Count every call and binary operation outside conditionals (hoisting candidates)."""
+        if isinstance(node, ast.IfExp):
+            return
+        if isinstance(node, (ast.BinOp, ast.Call)):
+            key = ast.dump(node)
+            self.counts[key] = self.counts.get(key, 0) + 1
+        for child in ast.iter_child_nodes(node):
+            self.count(child)
+
+    def expression(self, node: ast.AST, hoist: bool = True) -> str:
+        """C text of the Python expression `node` (fully parenthesised, same operation order)."""
+        key = ast.dump(node) if hoist and isinstance(node, (ast.BinOp, ast.Call)) else None
+        if key is not None and key in self.known:
+            return self.known[key]
+        text = self._plain(node, hoist)
+        if key is not None and self.counts.get(key, 0) > 1:
+            name = f"{self.prefix}t{len(self.known)}"
+            self.lines.append(f"    const double {name} = {text};")
+            self.known[key] = name
+            return name
+        return text
+
+    def _plain(self, node: ast.AST, hoist: bool) -> str:
+        sub = lambda n: self.expression(n, hoist)  # noqa: E731
+        if isinstance(node, ast.BinOp) and type(node.op) in _OPERATORS:
+            return f"({sub(node.left)} {_OPERATORS[type(node.op)]} {sub(node.right)})"
+        if isinstance(node, ast.BinOp) and isinstance(node.op, ast.Pow):
+            return f"pow({sub(node.left)}, {sub(node.right)})"
+        if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
+            return f"({'-' if isinstance(node.op, ast.USub) else '+'}{sub(node.operand)})"
+        if isinstance(node, ast.Constant) and type(node.value) in (int, float):
+            value = float(node.value)
+            if isinstance(node.value, int) and float(node.value) != node.value:
+                raise Untranslatable(f"integer {node.value} not exact as a double")
+            return f"({value!r})"
+        if isinstance(node, ast.Name):
+            return f"v_{node.id}"
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) \
+                and node.func.id in FUNCTIONS and not node.keywords:
+            return f"{node.func.id}({', '.join(sub(a) for a in node.args)})"
+        if isinstance(node, ast.IfExp):  # only the branch taken is evaluated, as in Python
+            inner = lambda n: self.expression(n, False)  # noqa: E731
+            return f"({inner(node.test)} ? {inner(node.body)} : {inner(node.orelse)})"
+        if isinstance(node, ast.BoolOp):
+            joint = " && " if isinstance(node.op, ast.And) else " || "
+            return "(" + joint.join(sub(v) for v in node.values) + ")"
+        if isinstance(node, ast.Compare) and len(node.ops) == 1 \
+                and type(node.ops[0]) in _COMPARISONS:
+            operator = _COMPARISONS[type(node.ops[0])]
+            return f"({sub(node.left)} {operator} {sub(node.comparators[0])})"
+        raise Untranslatable(f"cannot translate {ast.dump(node)[:80]}")
+
+
+def _leaves(node: ast.AST) -> list[ast.AST]:
+    """The scalar expressions of a (nested) list display, in row-major order."""
+    if isinstance(node, (ast.List, ast.Tuple)):
+        return [leaf for element in node.elts for leaf in _leaves(element)]
+    return [node]
+
+
+def python_to_c(source: str, name: str) -> tuple[str, int]:
+    """C translation of a function generated by :func:`sympy.lambdify` (``modules="math"``).
+
+    Parameters
+    ----------
+    source : str
+        The generated ``def``: list arguments unpacked by ``[a, b] = arg``, scalar arguments,
+        assignments ``x0 = ...`` (common subexpressions) and one ``return`` of a scalar or a
+        nested list.
+    name : str
+        Name of the C function ``static void name(const double *args..., double *out)``:
+        list arguments as pointers, scalar ones as ``double``; the returned values written to
+        ``out`` in row-major order.
+
+    Returns
+    -------
+    tuple of (str, int)
+        The C function and the number of values it writes.
+
+    Raises
+    ------
+    Untranslatable
+        For any construct outside the arithmetic of the generated functions.
+    """
+    function = ast.parse(source).body[0]
+    if not isinstance(function, ast.FunctionDef):
+        raise Untranslatable("not a function definition")
+    body = function.body
+    unpacked = {s.value.id for s in body if isinstance(s, ast.Assign)
+                and isinstance(s.targets[0], (ast.List, ast.Tuple))
+                and isinstance(s.value, ast.Name)}
+    arguments = [f"const double *v_{a.arg}" if a.arg in unpacked else f"double v_{a.arg}"
+                 for a in function.args.args]
+    emitter = _Emitter(f"{name}_")
+    for statement in body:
+        if isinstance(statement, (ast.Assign, ast.Return)) and statement.value is not None:
+            emitter.count(statement.value)
+    returned = 0
+    for statement in body:
+        if isinstance(statement, ast.Assign) and len(statement.targets) == 1:
+            target = statement.targets[0]
+            if isinstance(target, (ast.List, ast.Tuple)) and isinstance(statement.value, ast.Name):
+                for i, element in enumerate(target.elts):
+                    emitter.lines.append(f"    const double v_{element.id} = "
+                                         f"v_{statement.value.id}[{i}];")
+                continue
+            if isinstance(target, ast.Name):
+                emitter.lines.append(f"    const double v_{target.id} = "
+                                     f"{emitter.expression(statement.value)};")
+                continue
+        if isinstance(statement, ast.Return) and statement.value is not None:
+            leaves = _leaves(statement.value)
+            values = [emitter.expression(leaf) for leaf in leaves]
+            emitter.lines.extend(f"    out[{i}] = {v};" for i, v in enumerate(values))
+            returned = len(leaves)
+            continue
+        raise Untranslatable(f"cannot translate statement {ast.dump(statement)[:80]}")
+    head = f"static void {name}({', '.join(arguments + ['double *out'])})"
+    return head + " {\n" + "\n".join(emitter.lines) + "\n}\n", returned
+
+
+def kernel_source(functions: dict[str, Callable], sizes: Sequence[int]) -> str:
+    """The C source of ``panto_static_balance``, ``_linear``, ``_height`` and ``_reach_grid``
+    from the lambdified `functions` of
+    :func:`~panto.identification.structures.linearisation.static_functions`.
+
+    The first three read ``in = [p (sizes[0]), q (sizes[1]), u (sizes[2])]``, return 1 where the
+    linkage cannot close (the reach test ``reach >= 0`` fails), 2 where a result is not finite,
+    else 0 with the values of ``balance`` (``linear``, ``height``) at the linkage angles in
+    ``out``; ``panto_static_reach_grid(in, phi1, n, out)`` writes ``reach`` at ``q`` with its
+    first coordinate set to each of the `n` values ``phi1`` (2 where one is not finite).
+    """
+    parts = ["#include <math.h>\n"]
+    outputs = {}
+    for key in ("reach", "phi2", "phi3", "balance", "linear", "height"):
+        text, outputs[key] = python_to_c(inspect.getsource(functions[key]), f"static_{key}")
+        parts.append(text)
+    n_p, n_q = sizes[0], sizes[1]
+    for key, arguments in (("balance", "p, q, u"), ("linear", "p, q, u"), ("height", "p, q")):
+        parts.append(f"""
+int panto_static_{key}(const double *in, double *out) {{
+    const double *p = in, *q = in + {n_p}, *u = in + {n_p + n_q};
+    double reach, angles[2];
+    static_reach(p, q, &reach);
+    if (!(reach >= 0.0)) return 1;
+    static_phi2(p, q, &angles[0]);
+    static_phi3(p, q, angles[0], &angles[1]);
+    static_{key}({arguments}, angles, out);
+    for (int i = 0; i < {outputs[key]}; ++i) if (!isfinite(out[i])) return 2;
+    return 0;
+}}
+""")
+    parts.append(f"""
+int panto_static_reach_grid(const double *in, const double *phi1, int n, double *out) {{
+    double q[{n_q}];
+    for (int j = 0; j < {n_q}; ++j) q[j] = in[{n_p} + j];
+    for (int i = 0; i < n; ++i) {{
+        q[0] = phi1[i];
+        static_reach(in, q, &out[i]);
+        if (!isfinite(out[i])) return 2;
+    }}
+    return 0;
+}}
+""")
+    return "\n".join(parts)
+
+
+class StaticKernel:
+    """The compiled balance and linearisation (``None`` from a call: take the Python path).
+
+    Parameters
+    ----------
+    library : ctypes.CDLL
+        The library built from :func:`kernel_source`.
+    sizes : sequence of int
+        Lengths of ``p``, ``q`` and ``u``.
+    """
+
+    def __init__(self, library: ctypes.CDLL, sizes: Sequence[int]) -> None:
+        self.sizes = tuple(int(s) for s in sizes)
+        self._functions = {}
+        for key in ("balance", "linear", "height", "reach_grid"):
+            function = getattr(library, f"panto_static_{key}")
+            function.restype = ctypes.c_int
+            function.argtypes = [ctypes.c_void_p, ctypes.c_void_p] + (
+                [ctypes.c_int, ctypes.c_void_p] if key == "reach_grid" else [])
+            self._functions[key] = function
+
+    def _call(self, key: str, p, q, u, size: int) -> np.ndarray | None:
+        n_p, n_q, n_u = self.sizes
+        if len(p) != n_p or len(q) != n_q or len(u) != n_u:
+            return None
+        buffer = np.empty(n_p + n_q + n_u + size)
+        buffer[:n_p], buffer[n_p:n_p + n_q], buffer[n_p + n_q:n_p + n_q + n_u] = p, q, u
+        address = buffer.ctypes.data
+        status = self._functions[key](address, address + 8 * (n_p + n_q + n_u))
+        return buffer[n_p + n_q + n_u:] if status == 0 else None
+
+    def balance(self, p, q, u) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(r, dr/dq)`` at rest, or None where the Python path must run (module notes)."""
+        n = self.sizes[1]
+        out = self._call("balance", p, q, u, n + n * n)
+        return None if out is None else (out[:n].copy(), out[n:].reshape(n, n).copy())
+
+    def linear(self, p, q, u) -> list[np.ndarray] | None:
+        """``(M, dr/dv, dr/du, h, dh/dq, dh/dv, dh/du)`` at rest, or None (module notes)."""
+        n, m = self.sizes[1], self.sizes[2]
+        shapes = [(n, n), (n, n), (n, m), (n, 1), (n, n), (n, n), (n, m)]
+        out = self._call("linear", p, q, u, sum(a * b for a, b in shapes))
+        if out is None:
+            return None
+        arrays, start = [], 0
+        for rows, columns in shapes:
+            arrays.append(out[start:start + rows * columns].reshape(rows, columns).copy())
+            start += rows * columns
+        return arrays
+
+    def height(self, p, q) -> float | None:
+        """``y_cb`` at rest at the coordinates `q`, or None (module notes)."""
+        out = self._call("height", p, q, (0.0,) * self.sizes[2], 1)
+        return None if out is None else float(out[0])
+
+    def reach_grid(self, p, q, phi1: np.ndarray) -> np.ndarray | None:
+        """The linkage's reach (>= 0 where it closes) at `q` with its first coordinate set to
+        each of `phi1`, or None where one is not finite (module notes)."""
+        n_p, n_q = self.sizes[:2]
+        if len(p) != n_p or len(q) != n_q:
+            return None
+        buffer = np.empty(n_p + n_q + 2 * len(phi1))
+        buffer[:n_p], buffer[n_p:n_p + n_q] = p, q
+        buffer[n_p + n_q:n_p + n_q + len(phi1)] = phi1
+        address, start = buffer.ctypes.data, 8 * (n_p + n_q)
+        status = self._functions["reach_grid"](address, address + start, len(phi1),
+                                               address + start + 8 * len(phi1))
+        return buffer[n_p + n_q + len(phi1):] if status == 0 else None
+
+
+def load(functions: dict[str, Callable], sizes: Sequence[int]) -> StaticKernel | None:
+    """The compiled kernel of the lambdified `functions` of
+    :func:`~panto.identification.structures.linearisation.static_functions` (``p``, ``q``, ``u``
+    of lengths `sizes`; built on first use into the kernel cache), or None without a compiler or
+    when the translation fails."""
+    try:
+        source = kernel_source(functions, sizes)
+    except (Untranslatable, OSError, TypeError, SyntaxError):
+        return None
+    library = c_kernels.build_library(source, "static_balance", COMPILER_FLAGS)
+    try:
+        return None if library is None else StaticKernel(library, sizes)
+    except AttributeError:  # not our library
+        return None
+
+
+def switched_on() -> bool:
+    """False when ``PANTO_STATIC_KERNEL=0`` (:data:`SWITCH_VARIABLE`): the Python functions run."""
+    return c_kernels.switched_on(SWITCH_VARIABLE)
+
+
+__all__ = ["COMPILER_FLAGS", "SWITCH_VARIABLE", "FUNCTIONS", "Untranslatable", "python_to_c",
+           "kernel_source", "StaticKernel", "load", "switched_on"]
