@@ -174,6 +174,7 @@ def run_case(spec: effect_plants.CaseSpec, raw_options: Mapping[str, str],
         case = effect_plants.effect_case(spec)
         record.update(setting=dict(case.plant.setting), detectability=dict(case.detectability),
                       strongest=case.strongest, ceiling=dict(case.ceiling),
+                      step_drift=dict(case.step_drift), reproducible=case.reproducible,
                       simulation_s=time.perf_counter() - started)
         try:
             record["unabsorbed"] = unabsorbed(case)
@@ -190,6 +191,8 @@ def run_case(spec: effect_plants.CaseSpec, raw_options: Mapping[str, str],
                       gap_closed=dict(result.gap_closed()), diagnosis_s=time.perf_counter() - begun,
                       gap_significant=bool(result.gap.get("significant")),
                       remaining_significant=bool(result.remaining_gap.get("significant")),
+                      systematic_before=_systematic(result.gap),
+                      systematic_after=_systematic(result.remaining_gap),
                       summary=result.summary)
     except Exception as error:  # a failed case is recorded, never lost
         record.update(error=f"{type(error).__name__}: {error}",
@@ -198,12 +201,19 @@ def run_case(spec: effect_plants.CaseSpec, raw_options: Mapping[str, str],
     return score(record)
 
 
+def _systematic(gap: dict) -> dict:
+    """Per output: the fit points the residual's input-explained part costs (the gap tests'
+    ``systematic_cost``; None where not computed)."""
+    return {o: (v or {}).get("systematic_cost") for o, v in (gap.get("per_output") or {}).items()}
+
+
 def score(record: dict) -> dict:
     """Add ``outcome``, ``expected``, ``correct``, ``strong``, ``gap_closed_main`` and
     ``nominal_left``: per output, the true plant's validation fit less the fitted nominal's
     (fit points the nominal really misses; near zero when it absorbs the effect)."""
     outcome = "error" if "error" in record else \
-        (record["effects"][0] if record.get("effects") else record["verdict"])
+        (record["effects"][0] if record["verdict"] == "effect" and record.get("effects")
+         else record["verdict"])
     detectability = record.get("detectability") or {}
     main = max(detectability, key=detectability.get) if detectability else None
     closed = (record.get("gap_closed") or {}).get(main)
@@ -247,6 +257,8 @@ def summarise(records: list[dict]) -> dict:
     summary = {
         "library_top1_strong": _share([r for r in library if r["strong"]]),
         "library_top1_weak": _share([r for r in library if not r["strong"]]),
+        "library_top1_strong_reproducible": _share([r for r in library if r["strong"]
+                                                    and r.get("reproducible", True)]),
         "library_top1_all": _share(library),
         "library_top1_unabsorbable": _share([r for r in library if r.get("unabsorbable")]),
         "library_top1_absorbable": _share([r for r in library if r["strong"]
@@ -310,6 +322,9 @@ def markdown(report: dict) -> str:
              f"{_cell(s['out_of_library_unexplained_weak'])} | "
              f"{_cell(s['out_of_library_unexplained_all'])} |",
              f"| `none`, clean | | | {_cell(s['clean_none'])} |",
+             f"| top-1 name, strong library effects whose free run is reproducible (the true "
+             f"plant at half the step within {STRONG:g} points) | "
+             f"{_cell(s.get('library_top1_strong_reproducible', _share([])))} | | |",
              f"| top-1 name, library effects the fitted nominal misses by >= {STRONG:g} points "
              f"(filtered) | | | {_cell(s['library_top1_nominal_misses'])} |",
              f"| top-1 name, library effects no refitted nominal absorbs (*unabsorbed* >= "

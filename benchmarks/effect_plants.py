@@ -474,6 +474,20 @@ class EffectCase:
     ceiling: Mapping[str, float] = field(default_factory=dict)
     """Per output: the fit [%] of the noise-free plant (with the effect) on the noisy validation
     data, the best any model can reach."""
+    step_drift: Mapping[str, float] = field(default_factory=dict)
+    """Per output: the ceiling less the fit of the same plant integrated with half the step
+    [fit points]. Near zero for a plant whose free run is reproducible; large where tiny
+    differences grow (a head bouncing on the wire: each impact's timing shifts the next), and
+    there no model's free run can reach the ceiling, which only the identical integration
+    reproduces (:attr:`reproducible`)."""
+
+    @property
+    def reproducible(self) -> bool:
+        """Whether halving the integration step moves the true plant's validation fit by less
+        than 2 fit points on every output (the strength threshold of the benchmark); an output
+        whose fit is undefined (a head that flies for the whole run reads a constant zero) does
+        not count against it."""
+        return not any(abs(v) >= 2.0 for v in self.step_drift.values())
 
     @property
     def strongest(self) -> float:
@@ -514,4 +528,8 @@ def effect_case(spec: CaseSpec) -> EffectCase:
     detectability = {name: ceiling[name] - fit(validation["outputs"][name],
                                                validation["nominal"][name])
                      for name in spec.outputs}
-    return EffectCase(spec, plant, (runs[0], runs[1]), detectability, ceiling)
+    half = plant.measure(plant.simulate(time, *signals[1], step=0.5 * plant.step_limit()), time,
+                         1, spec.outputs)
+    drift = {name: ceiling[name] - fit(validation["outputs"][name], half[name])
+             for name in spec.outputs}
+    return EffectCase(spec, plant, (runs[0], runs[1]), detectability, ceiling, drift)

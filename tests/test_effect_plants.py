@@ -181,6 +181,20 @@ def test_a_clean_case_costs_nothing_and_a_delay_costs_fit(ep):
     assert delay.strongest > 2.0
     train, validation = delay.runs
     assert not np.allclose(train["eta"], validation["eta"])  # two input realisations
+    # a linear plant's free run does not depend on the integration step (RK4 at half the step)
+    assert clean.reproducible and delay.reproducible
+    assert max(abs(v) for v in delay.step_drift.values()) < 0.01
+
+
+def test_a_head_bouncing_on_the_wire_is_not_reproducible_at_half_the_step(ep):
+    """Tuning case three-mass/contact_loss/23: a head that flies a quarter of the time. Each
+    impact's timing shifts the next, so the same plant integrated at half the step loses many
+    fit points against its own record (the ceiling only the identical integration reaches).
+    Shorter runs of the same plant (4-10 s) stay reproducible: the divergence takes time."""
+    spec = ep.draw_spec("three-mass", "contact_loss", 23, quick=True)
+    case = ep.effect_case(spec)
+    assert np.mean(case.runs[1]["clean"]["F_c"] <= 0.0) > 0.1  # it flies
+    assert not case.reproducible and case.step_drift["F_c"] > 5.0, case.step_drift
 
 
 def test_split_is_stable_and_the_held_out_split_is_guarded(harness):
