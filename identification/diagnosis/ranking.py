@@ -24,7 +24,10 @@ from panto.identification.diagnosis.effects import (SignalRoles, build_candidate
 
 # --- the ranking on the training residual -----------------------------------------------------
 
-def _innermost(structure: ModelStructure) -> ModelStructure:
+def _bare_nominal(structure: ModelStructure) -> ModelStructure:
+    """The nominal under every augmentation (through an inside form's base, else its
+    ``nominal_structure``); not :func:`augmentations._innermost`, which stops at the first
+    structure that is not an :class:`AugmentedStructure`."""
     while hasattr(structure, "nominal_structure"):
         structure = structure.base if getattr(structure, "mode", "") == "inside" else \
             structure.nominal_structure
@@ -35,7 +38,7 @@ def _output_filter(structure: ModelStructure, parameters: Mapping[str, float], o
                    drive: str):
     from panto.identification.structures.output_error import LinearOutputError
 
-    inner = _innermost(structure)
+    inner = _bare_nominal(structure)
     if not isinstance(inner, LinearOutputError):
         return None
     f, b = inner.polynomials({k: v for k, v in parameters.items()
@@ -166,7 +169,7 @@ def mass_friction(model: Any, train: IdentificationData
     that force on mass ``i`` (exact for inputs linear between samples). The measured position's
     velocity is mass ``n-1``'s on a three-mass oscillator (``y_cb``), not the frame's, and a
     force on a mass reaches the outputs only through the dynamics. Empty for other nominals."""
-    inner = _innermost(model.structure)
+    inner = _bare_nominal(model.structure)
     if not isinstance(inner, OscillatorStructure) or inner.friction:
         return {}, {}
     values = {k: v for k, v in model.parameters.items() if k in inner.parameter_names}
