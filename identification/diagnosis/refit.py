@@ -234,7 +234,7 @@ def refit(structure: AugmentedStructure, model: Model, train: IdentificationData
 #: Where :func:`located_zone` looks for a dead zone: the input's quantiles at these levels, each
 #: with these widths (shares of the input's largest distance from its median).
 ZONE_LEVELS = tuple(np.linspace(0.02, 0.98, 25).tolist())
-ZONE_WIDTHS = (0.003, 0.01, 0.03, 0.1)
+ZONE_WIDTHS = (0.0005, 0.001, 0.002, 0.005, 0.01, 0.03, 0.1)
 #: Refinements of the grid's best centre (13 points over +-1 spacing, the spacing / 6 each time).
 ZONE_ZOOMS = 3
 
@@ -247,10 +247,11 @@ def located_zone(structure: AugmentedStructure, start: Mapping[str, float],
     centre (``-clip(u - c, -b, b)`` is ``-b sign(u - c)`` away from ``c``): the training cost has a
     basin about the true centre only as wide as the zone, and from a start outside it (the
     median, millimetres off a zone of tens of micrometres) the centre has no gradient and the
-    refit drives the width to zero. The grid (:data:`ZONE_LEVELS` x :data:`ZONE_WIDTHS`, 100
-    free runs of the model with the other parameters at `start`), then :data:`ZONE_ZOOMS`
-    finer 1-D grids about its best centre (39 runs), keeps the start itself when nothing on them
-    has a lower training cost. Other effects, and a zone whose centre is not
+    refit drives the width to zero; a trial zone a few times wider than the true one costs more
+    than none, so the widths go down to 0.05 % of the travel. The grid (:data:`ZONE_LEVELS` x
+    :data:`ZONE_WIDTHS`, 175 free runs of the model with the other parameters at `start`), then
+    :data:`ZONE_ZOOMS` finer 1-D grids about its best centre (39 runs), keeps the start itself
+    when nothing on them has a lower training cost. Other effects, and a zone whose centre is not
     fitted, return `start` unchanged."""
     centre = next((p for p in structure.effect_parameters if p.endswith(":centre")), None)
     if structure.effect != "dead_zone" or centre is None:
