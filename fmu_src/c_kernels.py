@@ -5,8 +5,9 @@ oscillators' splitting loop (:mod:`panto.identification.structures.friction_kern
 C99 compiled with the system compiler (``$CC``, ``cc`` or ``gcc``) into
 ``$PANTO_KERNEL_CACHE`` or ``~/.cache/panto/kernels/<first 12 hex of the source's SHA-256>/``
 the first time they are needed, built in a temporary file and moved into place so that parallel
-workers never load half a file. Without a compiler :func:`build_library` gives None and the
-callers keep their Python path.
+workers never load half a file; where the cache cannot be written, into a private temporary
+folder. Without a compiler :func:`build_library` gives None and the callers keep their Python
+path.
 """
 from __future__ import annotations
 
@@ -60,11 +61,19 @@ def build(target: Path, source: str, flags: tuple[str, ...], compiler: str | Non
 def build_library(source: str, name: str, flags: tuple[str, ...] = ("-O2",),
                   find: Callable[[], str | None] = find_compiler) -> ctypes.CDLL | None:
     """The shared library ``name.so`` compiled from `source` (cached, built on first use with the
-    compiler `find` names), or None if it cannot be built."""
+    compiler `find` names; in a private temporary folder when the cache cannot be written), or
+    None if it cannot be built."""
     target = cache_folder(source) / f"{name}.so"
     try:
         if not target.exists():
-            build(target, source, flags, find())
+            compiler = find()
+            try:
+                build(target, source, flags, compiler)
+            except OSError:
+                if compiler is None:
+                    raise
+                target = Path(tempfile.mkdtemp(prefix="panto-kernel-")) / f"{name}.so"
+                build(target, source, flags, compiler)
         return ctypes.CDLL(str(target))
     except (OSError, subprocess.SubprocessError):
         return None

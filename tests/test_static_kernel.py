@@ -5,6 +5,8 @@ and the linearisation must be the same with the kernel on and off, and where the
 raises (the linkage cannot close) the compiled path must raise the same way."""
 from __future__ import annotations
 
+import ctypes
+
 import numpy as np
 import pytest
 
@@ -107,3 +109,18 @@ def test_the_translation_keeps_python_operations_in_order():
     assert "? (0.0) : (v_s * (v_b - v_a))" in text
     with pytest.raises(static_kernel.Untranslatable):
         static_kernel.python_to_c("def f(a):\n    return a[0]\n", "f")
+
+
+def test_a_cache_that_cannot_be_written_builds_in_a_private_folder(tmp_path, monkeypatch):
+    """`c_kernels.build_library` with its cache under a plain file (no folder can be made there,
+    whoever runs the test): the library is built elsewhere and works; without a compiler, None."""
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a folder")
+    monkeypatch.setenv(c_kernels.CACHE_VARIABLE, str(blocker / "cache"))
+    source = "double panto_test_twice(double x) { return 2.0 * x; }\n"
+    library = c_kernels.build_library(source, "twice")
+    assert library is not None
+    library.panto_test_twice.restype = ctypes.c_double
+    library.panto_test_twice.argtypes = [ctypes.c_double]
+    assert library.panto_test_twice(1.25) == 2.5
+    assert c_kernels.build_library(source + "\n", "twice", find=lambda: None) is None

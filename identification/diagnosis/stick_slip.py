@@ -21,8 +21,6 @@ from __future__ import annotations
 
 import ctypes
 import functools
-import subprocess
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -60,13 +58,6 @@ def load_kernel() -> ctypes._CFuncPtr | None:
     except OSError:
         return None
     library = c_kernels.build_library(source, "stick_slip", COMPILER_FLAGS, find=lambda: _compiler())
-    if library is None and _compiler() is not None:  # the cache cannot be written: a private folder
-        try:
-            target = Path(tempfile.mkdtemp(prefix="panto-kernel-")) / "stick_slip.so"
-            c_kernels.build(target, source, COMPILER_FLAGS, _compiler())
-            library = ctypes.CDLL(str(target))
-        except (OSError, subprocess.SubprocessError):
-            return None
     try:
         return None if library is None else _bind(library)
     except AttributeError:  # not our library
