@@ -23,7 +23,8 @@ from panto.identification.diagnosis.augmentations import (INSIDE, AugmentedStruc
                                                           describe_augmentation)
 from panto.identification.diagnosis.effects import NONLINEAR_EFFECTS, SignalRoles
 from panto.identification.diagnosis.nominal import Progress, fit_per_output, simulate
-from panto.identification.diagnosis.support import IMPROVEMENT_FLOOR, Refit, judge_trial
+from panto.identification.diagnosis.support import (IMPROVEMENT_FLOOR, Refit, judge_trial,
+                                                     residuals)
 from panto.identification.estimation.base import (IdentificationData, IdentificationError,
                                                   ModelStructure)
 from panto.identification.estimation.least_squares import fit_least_squares
@@ -264,18 +265,21 @@ def located_zone(structure: AugmentedStructure, start: Mapping[str, float],
     spread = float(np.max(np.abs(u - median)))
     if not spread > 0:
         return dict(start)
-    lower, upper = structure.bounds()[centre], structure.bounds()[width]
+    bounds = structure.bounds()
     scale = np.nanstd(train.outputs, axis=0)
     scale = np.where(scale > 0, scale, 1.0)
 
+    def at(values: Mapping[str, float], c: float, b: float) -> dict[str, float]:
+        (c_low, c_high), (b_low, b_high) = bounds[centre], bounds[width]
+        return {**values, centre: float(min(max(c, c_low), c_high)),
+                width: float(min(max(b, b_low), b_high))}
+
     def cost(values: Mapping[str, float]) -> float:
         try:
-            y = np.asarray(structure.simulate(dict(values), train), float)
+            _, e = residuals(structure, values, train)
         except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError):
             return math.inf
-        y = y[:, [structure.output_names.index(o) for o in train.output_names]]
-        e = np.where(np.isfinite(train.outputs), train.outputs - y, 0.0) / scale
-        total = float(np.sum(e ** 2))
+        total = float(np.sum((e / scale) ** 2))
         return total if math.isfinite(total) else math.inf
 
     best, best_cost = dict(start), cost(start)
@@ -283,8 +287,7 @@ def located_zone(structure: AugmentedStructure, start: Mapping[str, float],
     centres = np.quantile(u, ZONE_LEVELS)
     for c in centres:
         for share in ZONE_WIDTHS:
-            trial = {**start, centre: float(min(max(c, lower[0]), lower[1])),
-                     width: float(min(max(share * spread, upper[0]), upper[1]))}
+            trial = at(start, c, share * spread)
             value = cost(trial)
             if value < best_cost:
                 best, best_cost = trial, value
@@ -293,7 +296,7 @@ def located_zone(structure: AugmentedStructure, start: Mapping[str, float],
     step = float(np.max(np.diff(centres))) if len(centres) > 1 else spread
     for _ in range(ZONE_ZOOMS if best_cost < initial_cost else 0):
         for c in np.linspace(best[centre] - step, best[centre] + step, 13):
-            trial = {**best, centre: float(min(max(c, lower[0]), lower[1]))}
+            trial = at(best, c, best[width])
             value = cost(trial)
             if value < best_cost:
                 best, best_cost = trial, value
