@@ -8,7 +8,8 @@ the training run:
    states), their time derivatives (central differences after a zero-phase Butterworth low-pass,
    :attr:`DiscoveryOptions.smoothing`), and each of these delayed by a few samples
    (:attr:`DiscoveryOptions.delays`).
-2. **Term library** ``phi``: ``s^2``, ``s^3``, ``|s|``, ``s|s|``, ``tanh(s / eps)`` (a smooth sign,
+2. **Term library** ``phi``: ``s^2``, ``s^3``, ``|s|`` (of a signal on both sides of zero;
+   else it is linear), ``s|s|``, ``tanh(s / eps)`` (a smooth sign,
    ``eps`` a fraction of the signal's standard deviation) of every signal; the delayed signals
    themselves; products ``s_i s_j`` of the undelayed signals; and of every undelayed input and
    output kinks ``|s - c|`` at a few of its quantiles (where a sign-blind sensor's zero lies
@@ -97,6 +98,10 @@ class DiscoveryOptions:
         two-sided); a term whose coefficient does not is not chosen.
     max_evaluations : int
         Model simulations per refit.
+    families : tuple of str
+        The term families searched (a subset of :data:`FAMILIES`; default all).
+    derivatives : bool
+        Whether the signals' time derivatives are candidate signals.
     """
 
     delays: tuple[int, ...] = (2, 5, 10)
@@ -113,6 +118,8 @@ class DiscoveryOptions:
     min_gain: float = 0.0
     significance: float = 1.959963984540054
     max_evaluations: int = 600
+    families: tuple[str, ...] = FAMILIES
+    derivatives: bool = True
 
     def __post_init__(self) -> None:
         problems = [f"solver {self.solver!r} is not 'omp' or 'lasso-bic'"
@@ -123,6 +130,10 @@ class DiscoveryOptions:
                 w > 0.0 for w in (self.sign_width, *self.play_radii, *self.memory_time_constants)):
             problems.append("smoothing and kink_quantiles must lie in (0, 1), the widths must be "
                             "positive")
+        unknown = [f for f in self.families if f not in FAMILIES]
+        if unknown or not self.families:
+            problems.append(f"families {list(self.families)} must be a non-empty subset of "
+                            f"{list(FAMILIES)}")
         if problems:
             raise IdentificationError("discovery options: " + "; ".join(problems))
 
@@ -265,7 +276,7 @@ def term_library(structure: ModelStructure, data: IdentificationData, simulated:
     roles = [("input", n) for n in data.input_names] + \
             [("output", n) for n in structure.output_names]
     base = [Signal(role, name, derivative, 0, options.smoothing)
-            for role, name in roles for derivative in (False, True)]
+            for role, name in roles for derivative in (False, True)[:1 + options.derivatives]]
     delayed = [replace(x, delay=int(d)) for x in base for d in options.delays]
     values = {x: x.values(data, simulated, structure.output_names) for x in base}
     units = dict(data.units)
@@ -276,7 +287,7 @@ def term_library(structure: ModelStructure, data: IdentificationData, simulated:
             continue
         unit = units.get(x.name, "") + ("/s" if x.derivative and units.get(x.name) else "")
         terms += [Term(f, (x,), options.sign_width * spread if f == "sign" else 0.0, unit)
-                  for f in _STATIC]
+                  for f in _STATIC if f != "abs" or _crosses(values[replace(x, delay=0)], 0.0)]
         if x.delay:
             terms.append(Term("delay", (x,)))
         elif not x.derivative:
@@ -288,7 +299,13 @@ def term_library(structure: ModelStructure, data: IdentificationData, simulated:
     if options.products:
         live = [x for x in base if np.std(values[x]) > 0.0]
         terms += [Term("product", (a, b)) for i, a in enumerate(live) for b in live[i + 1:]]
-    return terms
+    return [t for t in terms if t.family in options.families]
+
+
+def _crosses(s: np.ndarray, level: float) -> bool:
+    """Whether `s` lies on both sides of `level` (else ``|s - level|`` is ``+-(s - level)``,
+    a linear term, not a kink)."""
+    return bool(np.min(s) < level < np.max(s))
 
 
 # --- the sparse regression --------------------------------------------------------------------
@@ -491,6 +508,8 @@ def discover(structure: ModelStructure, parameters: Mapping[str, float], free: S
     say = progress or (lambda _: None)
     simulated = np.asarray(structure.simulate(parameters, train), float)
     library = term_library(structure, train, simulated, options)
+    if not library:
+        return None
     columns = np.column_stack([t.evaluate(train, simulated, names) for t in library])
     ranked: dict[str, list[tuple[Term, float]]] = {}
     for output in train.output_names:

@@ -48,9 +48,18 @@ causes it, and how far the gap shrinks once that effect is in the model.
    energy per band and segment before and after, the share of residual energy removed, and the
    effect's parameters with their standard deviations.
 
+5. **Challenge.** When effects were accepted and a significant gap remains, the out-of-vocabulary
+   mechanisms of the discovery library (a play operator: hysteresis, backlash; kinks ``|s - c|``:
+   a sign-blind sensor; of the inputs and the nominal's simulated outputs) are refitted in the
+   nominal (:func:`_challenge`). When the best of them gains more validation fit points on its
+   output than the accepted effects gain on any output, no effect is named: the vocabulary's best
+   closed only part of a gap that something outside it explains better (a hysteresis is not an
+   actuator lag because a lag closes a tenth of its gap).
+
 Verdict: ``effect`` (the ordered list), ``none`` (no effect accepted and the gap is not significant:
 within the noise) or ``unexplained`` (a significant gap that no candidate closes on withheld data,
-reported with where it lies). No attribution is forced.
+or that an out-of-vocabulary term explains better than the accepted effects, reported with where
+it lies and the term as a hypothesis). No attribution is forced.
 """
 from __future__ import annotations
 
@@ -132,8 +141,9 @@ class Diagnosis:
     discovery: Mapping[str, Any] | None = None
     """When the verdict is ``unexplained``: the best term of the discovery library
     (:func:`~panto.identification.diagnosis.discovery.discover`) refitted in the nominal, with its
-    withheld-data gain, as a hypothesis (the verdict stays ``unexplained``); None otherwise or
-    when no term gains on the withheld run."""
+    withheld-data gain, as a hypothesis (the verdict stays ``unexplained``); or the
+    out-of-vocabulary term the accepted effects yielded to (:func:`_challenge`; its ``yielded``
+    says by how much); None otherwise or when no term gains on the withheld run."""
 
     def gap_closed(self) -> dict[str, float]:
         """Per output: share of the validation residual energy removed by all accepted effects."""
@@ -234,6 +244,13 @@ class DiagnosisOptions:
     """When the verdict is ``unexplained``, search a library of candidate terms by sparse
     regression on the training residual and report the best refitted term as a hypothesis
     (:mod:`~panto.identification.diagnosis.discovery`)."""
+    challenge: bool = True
+    """When effects were accepted but a significant gap remains, challenge them with the
+    out-of-vocabulary mechanisms of the discovery library (:data:`CHALLENGERS`: a play operator
+    for hysteresis and backlash, kinks ``|s - c|`` for sign-blind sensors) refitted in the
+    nominal: when the best of them gains more on the withheld run than the accepted effects do on
+    any output, the verdict is ``unexplained`` with that term as the hypothesis
+    (:func:`_challenge`)."""
     workers: int | None = None
     """Worker processes for a round's candidate refits (:mod:`~panto.identification.diagnosis.
     parallel`; the verdict is the serial one): by default the CPUs available (one inside a
@@ -308,20 +325,30 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
         search = _search(model, before, candidates,
                          Search(train, validation, roles, options, fit_options, say,
                                  black_box_validation(adequacy, validation)), pool)
+    nominal_model = model
     model, current, rounds, steps, accepted = search
-    analysis_after = _analyse(validation, current, model, roles) if steps else analysis_before
     remaining_gap = _gap(model, validation, current, roles) if steps else gap
-    verdict = "effect" if steps else ("unexplained" if gap["significant"] else "none")
     fit_after = fit_per_output(validation, current)
+    challenger = _challenge(nominal_model, train, validation, fit_before, fit_after, executor,
+                            progress) \
+        if steps and remaining_gap["significant"] and options.challenge else None
+    if challenger is not None:  # the accepted effects yield to an out-of-vocabulary term
+        model, current, steps, accepted, remaining_gap = nominal_model, before, [], [], gap
+        fit_after = fit_per_output(validation, current)
+    analysis_after = _analyse(validation, current, model, roles) if steps else analysis_before
+    verdict = "effect" if steps else ("unexplained" if gap["significant"] or challenger
+                                      else "none")
     where = where_summary(analysis_before, validation)
     summary = _summary(verdict, accepted, fit_before, fit_after, where, remaining_gap, gap) + \
         "".join(f"; the runs cannot tell {s.effect} from {' or '.join(s.alternatives)} (withheld "
                 "gains within the folds' standard error, training dBIC within 10: a run exciting "
                 "where they differ would tell)" for s in steps if s.alternatives) + \
         _training_only_text(_training_only(rounds, accepted))
-    hypothesis = _discovery(model, train, validation, executor, progress,
-                            adequacy or adequacy_quietly(nominal, result, train)) \
-        if verdict == "unexplained" and options.discovery else None
+    if challenger is not None:
+        summary += f" {challenger['yielded']}"
+    hypothesis = challenger or (_discovery(model, train, validation, executor, progress,
+                                           adequacy or adequacy_quietly(nominal, result, train))
+                                if verdict == "unexplained" and options.discovery else None)
     if hypothesis is not None and hypothesis.get("term") is None:
         summary += f" Discovery not run: {hypothesis['summary']}"
     elif hypothesis is not None:
@@ -510,6 +537,57 @@ def _discovery(model: Model, train: IdentificationData, validation: Identificati
     report.setdefault("summary", _hypothesis_text(report))
     if progress:
         progress("diagnose: hypothesis: " + report["summary"])
+    return report
+
+
+#: Term families of the discovery library no effect of the vocabulary represents: the play
+#: operator (hysteresis, backlash) and kinks ``|s - c|`` (a sign-blind sensor), of the inputs and
+#: the nominal's simulated outputs as they are (not delayed, not differentiated: a delayed
+#: output is a lag, which the vocabulary has).
+CHALLENGERS = ("play", "abs")
+#: The challenge's :class:`~panto.identification.diagnosis.discovery.DiscoveryOptions`:
+#: :data:`CHALLENGERS` of undelayed, underived signals, kinks at every twentieth quantile (a
+#: sensor's zero can lie anywhere in the signal's range).
+CHALLENGE = {"families": CHALLENGERS, "delays": (), "derivatives": False,
+             "kink_quantiles": tuple(k / 20 for k in range(1, 20))}
+
+
+def _challenge(nominal: Model, train: IdentificationData, validation: IdentificationData,
+               fit_before: Mapping[str, float], fit_after: Mapping[str, float], executor: Any,
+               progress: Progress | None) -> dict[str, Any] | None:
+    """The best out-of-vocabulary term (:data:`CHALLENGERS`) refitted in the nominal, when it
+    gains more validation fit points on its output than the accepted effects gain on any output
+    (:attr:`DiagnosisOptions.challenge`); None otherwise. A hysteresis is not an actuator lag
+    because a lag closes part of its gap: the vocabulary's best is named only when nothing outside
+    it explains the withheld run better."""
+    from panto.identification.diagnosis.discovery import DiscoveryOptions, discover
+
+    gained = max(fit_after[o] - fit_before[o] for o in fit_before)
+    if progress:
+        progress(f"diagnose: a significant gap remains after the accepted effects (validation "
+                 f"+{gained:.2f} points at most): challenging them with out-of-vocabulary terms")
+    try:
+        hypothesis = discover(nominal.structure, nominal.parameters, nominal.free, train,
+                              validation, options=DiscoveryOptions(**CHALLENGE),
+                              executor=executor, progress=indented(progress))
+    except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError) as error:
+        if progress:
+            progress(f"diagnose: challenge failed ({error}); the accepted effects stand")
+        return None
+    if hypothesis is None or not hypothesis.gain > gained:
+        if progress:
+            progress("diagnose: the accepted effects stand" + (
+                "" if hypothesis is None else f" ({hypothesis.term} gains "
+                f"{hypothesis.gain:.2f} points on {hypothesis.output})"))
+        return None
+    report = hypothesis.to_dict()
+    report["summary"] = _hypothesis_text(report)
+    report["yielded"] = (
+        f"The vocabulary's best gained at most {gained:.2f} validation fit points on an output; "
+        f"{hypothesis.term}, outside the vocabulary, gains {hypothesis.gain:.2f} on "
+        f"{hypothesis.output}: no effect of the vocabulary is named.")
+    if progress:
+        progress("diagnose: " + report["yielded"])
     return report
 
 

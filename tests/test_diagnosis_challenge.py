@@ -1,0 +1,77 @@
+"""The accepted effects challenged by the out-of-vocabulary terms (issue 24): a hysteresis must not
+be named after the vocabulary effect that closes part of its gap. Plant written here: a linear
+second-order system whose measured output passes through a backlash (play operator, outside the
+vocabulary), nominal ``linear-2``. The challenge returns the play term when the accepted effects
+gained less on the withheld run than it does, and leaves them standing when they gained more."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import signal
+
+from panto.identification.diagnosis.discovery import DiscoveryOptions, play, term_library
+from panto.identification.diagnosis.nominal import fit_nominal
+from panto.identification.diagnosis.pipeline import CHALLENGE, CHALLENGERS, _challenge
+from panto.identification.diagnosis.refit import Model
+from panto.identification.diagnosis.support import build_structure
+from panto.identification.estimation.base import IdentificationData, IdentificationError
+
+RATE = 50.0
+
+
+def _run(seed: int, radius: float, n: int = 1500) -> IdentificationData:
+    """Low-pass noise through ``w^2 / (s^2 + 2 z w s + w^2)`` (w 6 rad/s, z 0.25), measured
+    through ``play(., radius)`` plus 1 % white noise."""
+    rng = np.random.default_rng(seed)
+    b, a = signal.butter(2, 0.08)
+    u = 3.0 * signal.lfilter(b, a, rng.normal(size=n))
+    bd, ad = signal.bilinear([36.0], [1.0, 3.0, 36.0], fs=RATE)
+    y = play(signal.lfilter(bd, ad, u), radius)
+    y = y + 0.01 * np.std(y) * rng.normal(size=n)
+    return IdentificationData(np.arange(n) / RATE, u[:, None], y[:, None], ("u",), ("y",))
+
+
+@pytest.fixture(scope="module")
+def backlash():
+    train, validation = _run(1, 0.4), _run(2, 0.4)
+    structure, free = build_structure("linear-2", train, {})
+    result = fit_nominal(structure, free, train)
+    model = Model(structure, dict(result.parameters), tuple(free), dict(result.std),
+                  np.asarray(result.covariance, float), dict(result.fit))
+    return model, train, validation
+
+
+def _nominal_fit(model, data) -> float:
+    from panto.identification.estimation.base import fit_percent
+    return float(fit_percent(data.output("y"), model.structure.simulate(model.parameters,
+                                                                         data)[:, 0]))
+
+
+def test_the_play_term_wins_over_effects_that_gained_less(backlash):
+    model, train, validation = backlash
+    before = _nominal_fit(model, validation)
+    assert before < 95.0  # the backlash costs the linear model fit points
+    hypothesis = _challenge(model, train, validation, {"y": before}, {"y": before + 0.3}, None,
+                            None)
+    assert hypothesis is not None and hypothesis["families"][0] == "play"
+    assert hypothesis["gain"] > 0.3 and "outside the vocabulary" in hypothesis["yielded"]
+
+
+def test_effects_that_gained_more_stand(backlash):
+    model, train, validation = backlash
+    before = _nominal_fit(model, validation)
+    assert _challenge(model, train, validation, {"y": before}, {"y": 99.9}, None, None) is None
+
+
+def test_the_challenge_searches_only_its_families(backlash):
+    model, train, _ = backlash
+    simulated = model.structure.simulate(model.parameters, train)
+    library = term_library(model.structure, train, simulated, DiscoveryOptions(**CHALLENGE))
+    assert library and {t.family for t in library} == set(CHALLENGERS)
+    # a delayed output is a lag and |s| of a one-signed signal is linear: neither is a challenger
+    assert all(not x.delay and not x.derivative for t in library for x in t.signals)
+    for t in library:
+        s = t.signals[0].values(train, simulated, model.structure.output_names)
+        assert t.family != "abs" or s.min() < t.width < s.max()
+    with pytest.raises(IdentificationError, match="families"):
+        DiscoveryOptions(families=("hysteron",))
