@@ -185,6 +185,7 @@ def plot_trajectories(t: np.ndarray, inputs: dict, zero: float, measured: dict, 
     axes[-1].set_xlabel("time [s]")
     axes[0].set_title(f"{title}: measured vs the nominal pantograph model")
     fig.tight_layout()
+    fig.set_layout_engine(None)  # laid out: savefig draws once
     return fig
 
 

@@ -24,6 +24,8 @@ import numpy as np
 OUTPUT_UNITS = {"F_c": ("N", 1.0), "y_cb": ("mm", 1e3), "xi": ("mm", 1e3)}
 #: Points per drawn line at most (min/max per bucket keeps the envelope); keeps the SVG small.
 MAX_POINTS = 1500
+#: Resolution of ``overview.png`` [dots per inch].
+PNG_DPI = 100
 
 
 def write_overview(out: str | Path, summary: Mapping[str, Any] | None = None,
@@ -51,11 +53,36 @@ def write_overview(out: str | Path, summary: Mapping[str, Any] | None = None,
     figure = draw_overview(out, summary)
     if figure is None:
         return None
+    lay_out_once(figure, PNG_DPI)
     for suffix in (".svg", ".pdf"):
         figure.savefig(out / f"{name}{suffix}")
     target = out / f"{name}.png"
-    figure.savefig(target, dpi=100)
+    figure.savefig(target, dpi=PNG_DPI)
     return target
+
+
+def lay_out_once(figure: Any, dpi: float) -> None:
+    """Run `figure`'s layout engine once, at `dpi` [dots per inch], then switch it off.
+
+    Each save of a figure with a layout engine lays it out again and draws it twice (once
+    unrendered for the layout); laid out once here, the three saves (SVG, PDF, PNG) draw once
+    each. The PNG at `dpi` gets the layout its own save would have computed.
+
+    Parameters
+    ----------
+    figure : matplotlib.figure.Figure
+        The drawn figure, its layout engine (if any) not yet run.
+    dpi : float
+        Resolution the layout is computed at [dots per inch].
+    """
+    from matplotlib import rc_context
+
+    figure.set_dpi(dpi)
+    engine = figure.get_layout_engine()
+    if engine is not None:
+        engine.execute(figure)
+    with rc_context({"figure.autolayout": False, "figure.constrained_layout.use": False}):
+        figure.set_layout_engine(None)  # None, not "none": no placeholder engine to draw for
 
 
 def draw_overview(out: Path, summary: Mapping[str, Any]) -> Any:

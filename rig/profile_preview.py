@@ -50,6 +50,7 @@ def preview_profile(path: str | Path | Profile, *, out: str | Path) -> list[Path
     fig.suptitle(f"profile {profile.name}: {profile.duration:g} s at {profile.sample_rate:g} Hz, "
                  f"seed {profile.seed}")
     fig.tight_layout()
+    fig.set_layout_engine(None)  # laid out: savefig draws once
     png_path = out / f"{profile.name}.png"
     fig.savefig(png_path, dpi=110)
     return [csv_path, png_path]

@@ -86,3 +86,21 @@ def test_thinning_keeps_the_envelope():
     xs, ys = thin(x, y, 1000)
     assert len(xs) <= 1000 and np.all(np.diff(xs) > 0)
     assert ys.max() == 7.0 and ys.min() == pytest.approx(-1.0, abs=1e-3)
+
+
+def test_overview_laid_out_once_looks_as_laid_out_per_save_and_draws_once_per_format(
+        tmp_path, monkeypatch):
+    from matplotlib.figure import Figure
+    from matplotlib.image import imread
+
+    summary = _demo_folder(tmp_path)
+    independent = draw_overview(tmp_path, summary)  # its own constrained layout in savefig
+    independent.savefig(tmp_path / "per_save.png", dpi=100)
+    draws = []
+    original = Figure.draw
+    monkeypatch.setattr(Figure, "draw", lambda self, renderer: (draws.append(self),
+                                                                original(self, renderer))[1])
+    png = write_overview(tmp_path, summary)
+    assert len(draws) == 3  # SVG, PDF, PNG: no second (layout) draw per save
+    assert (tmp_path / "overview.svg").stat().st_size > 0
+    np.testing.assert_array_equal(imread(png), imread(tmp_path / "per_save.png"))

@@ -54,6 +54,7 @@ def plot_detection_steps(video: str | Path, setup: TrackerSetup, frame_index: in
             row[4].plot([cx], [cy], "+", color="black", markersize=8, markeredgewidth=1)
     figure.suptitle(f"{Path(video).name}, frame {frame_index}: marker detection steps")
     figure.tight_layout()
+    figure.set_layout_engine(None)  # laid out: savefig draws once
     out_png = Path(out_png)
     figure.savefig(out_png, dpi=90)
     return out_png
@@ -92,6 +93,7 @@ def plot_synchronisation(result: SyncResult, out_png: str, *, window: int = 60) 
                     f"{result.phase} = {result.shift}", xlabel="phase [fine samples]",
               ylabel="peak rho", ylim=(min(0.0, np.nanmin(result.peaks_per_phase())), 1.0))
     figure.tight_layout()
+    figure.set_layout_engine(None)  # laid out: savefig draws once
     figure.savefig(out_png, dpi=110)
     return str(out_png)
 

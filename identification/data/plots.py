@@ -36,6 +36,7 @@ def plot_aliasing_check(check: AliasingCheck, out_png: str) -> str:
              xlim=(0, check.max_frequency))
     axis.legend()
     figure.tight_layout()
+    figure.set_layout_engine(None)  # laid out: savefig draws once
     figure.savefig(out_png, dpi=110)
     return str(out_png)
 

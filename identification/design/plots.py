@@ -156,6 +156,7 @@ def plot_design(design: PantographDesign, folder: str | Path) -> dict[str, Path]
     axes[-1].set_xlabel("time [s]")
     fig.suptitle(f"{design.structure}: {design.criterion}-optimal inputs vs APRBS")
     fig.tight_layout()
+    fig.set_layout_engine(None)  # laid out: savefig draws once
     inputs = folder / "doe_inputs.png"
     fig.savefig(inputs, dpi=120)
     scale = np.array([abs(design.parameters[n]) or 1.0 for n in design.parameter_names])
@@ -170,6 +171,7 @@ def plot_design(design: PantographDesign, folder: str | Path) -> dict[str, Path]
     axis.legend()
     axis.grid(True, axis="y", alpha=0.3)
     fig.tight_layout()
+    fig.set_layout_engine(None)  # laid out: savefig draws once
     std = folder / "doe_std.png"
     fig.savefig(std, dpi=120)
     return {"inputs_plot": inputs, "std_plot": std}
@@ -178,5 +180,6 @@ def _save(figure, path: str | Path) -> Path:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     figure.tight_layout()
+    figure.set_layout_engine(None)  # laid out: savefig draws once
     figure.savefig(path, dpi=110)
     return path

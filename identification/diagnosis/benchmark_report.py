@@ -57,6 +57,7 @@ def plot_confusion(confusion: Mapping[str, Mapping[str, int]], path: str | Path)
     axes.set_ylabel("hidden effect")
     axes.set_title("Diagnosis benchmark: confusion matrix")
     figure.tight_layout()
+    figure.set_layout_engine(None)  # laid out: savefig draws once
     figure.savefig(path, dpi=110)
     return Path(path)
 

@@ -43,6 +43,7 @@ def _save(figure, path: str | Path) -> str:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     figure.tight_layout()
+    figure.set_layout_engine(None)  # laid out: savefig draws once
     figure.savefig(path, dpi=110)
     return str(path)
 
@@ -168,6 +169,7 @@ def plot_series(diagnosis: Any, path: Path) -> Path:
         bottom.legend(fontsize=7, loc="upper right")
     axes[-1, 0].set_xlabel("time [s]")
     figure.tight_layout()
+    figure.set_layout_engine(None)  # laid out: savefig draws once
     figure.savefig(path, dpi=90)
     return path
 
@@ -200,5 +202,6 @@ def plot_bands(diagnosis: Any, path: Path) -> Path | None:
         axis.legend(fontsize=7)
     axes[-1, 0].set_xlabel("band [Hz]")
     figure.tight_layout()
+    figure.set_layout_engine(None)  # laid out: savefig draws once
     figure.savefig(path, dpi=90)
     return path

@@ -48,6 +48,7 @@ def plot_fit(result: IdentificationResult, data: IdentificationData, path: str |
     axes[0, 0].legend(loc="upper right", fontsize=8)
     fig.suptitle(f"{result.structure} ({result.method}), free run", fontsize=10)
     fig.tight_layout()
+    fig.set_layout_engine(None)  # laid out: savefig draws once
     fig.savefig(path, dpi=110)
     return Path(path)
 
@@ -90,6 +91,7 @@ def plot_comparison(table: ComparisonTable, out_png: str | os.PathLike, *,
     ax.grid(True, axis="y", alpha=0.3)
     ax.legend(fontsize=8, ncol=2)
     fig.tight_layout()
+    fig.set_layout_engine(None)  # laid out: savefig draws once
     fig.savefig(out_png, dpi=120)
     return out_png
 
@@ -127,6 +129,7 @@ def plot_validation(table: ComparisonTable, validation: IdentificationData,
         axes[-1, 0].set_xlabel("time [s]")
         fig.suptitle(f"{row.structure}: validation ({validation.source or 'validation data'})")
         fig.tight_layout()
+        fig.set_layout_engine(None)  # laid out: savefig draws once
         path = folder / f"validation_{row.structure}.png"
         fig.savefig(path, dpi=110)
         written.append(path)
@@ -169,6 +172,7 @@ def plot_pareto(result: ParetoResult, out_png: str | os.PathLike, *,
     ax.grid(True, alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
+    fig.set_layout_engine(None)  # laid out: savefig draws once
     fig.savefig(out_png, dpi=120)
     return out_png
 

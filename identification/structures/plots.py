@@ -46,6 +46,7 @@ def plot_collector_head(result: CollectorHeadResult, out_png: str | Path) -> Pat
     axes[1, 0].set_ylabel("phase [deg]")
     figure.suptitle(f"Collector head {result.source} (shaded: above {result.reliable_up_to_hz:g} Hz)")
     figure.tight_layout()
+    figure.set_layout_engine(None)  # laid out: savefig draws once
     out = Path(out_png)
     out.parent.mkdir(parents=True, exist_ok=True)
     figure.savefig(out, dpi=110)
@@ -93,6 +94,7 @@ def plot_eigenvalue_sensitivity(result: EigenvalueSensitivity, out_png: str | os
     bars.set_title("Influence ranking")
     bars.grid(True, axis="x", alpha=0.3)
     fig.tight_layout()
+    fig.set_layout_engine(None)  # laid out: savefig draws once
     fig.savefig(out_png, dpi=120)
     return out_png
 
