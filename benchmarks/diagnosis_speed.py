@@ -1,10 +1,10 @@
 """Benchmark: wall time of a full sim-to-real diagnosis of a 60 s, two-input, three-output run
 (issue 8, "Also": under a minute on this machine; issue 24: under 30 s on 2 cores).
 
-Run by hand; writes benchmarks/diagnosis_speed.json and benchmarks/diagnosis_speed.md.
+Run by hand; writes diagnosis_speed.json and diagnosis_speed.md into benchmarks/ (or --out).
 
     .venv/bin/python benchmarks/diagnosis_speed.py [--duration 60] [--structure physical-linear]
-        [--workers N]
+        [--workers N] [--out FOLDER]
 
 Data: two 61 s virtual-test-bed runs (APRBS on both inputs, two realisations: training and
 validation) with the rig's imperfections as the thesis describes them (the default
@@ -70,6 +70,8 @@ def main() -> int:
     parser.add_argument("--structure", default="physical-linear")
     parser.add_argument("--workers", type=int, default=None,
                         help="processes for a round's refits (default: the CPUs available)")
+    parser.add_argument("--out", type=Path, default=ROOT / "benchmarks",
+                        help="folder of diagnosis_speed.json and .md (default: benchmarks/)")
     args = parser.parse_args()
     from panto.identification.diagnosis.parallel import resolve_workers
     from panto.identification.diagnosis.pipeline import DiagnosisOptions, diagnose
@@ -101,7 +103,8 @@ def main() -> int:
         "fit_after": dict(result.fit_after), "load_average_before": load_before,
         "load_average_after": os.getloadavg(), "cpus": os.cpu_count(), "timeline": timeline,
         "machine": platform.platform(), "python": platform.python_version()}
-    out = ROOT / "benchmarks"
+    out = args.out
+    out.mkdir(parents=True, exist_ok=True)
     (out / "diagnosis_speed.json").write_text(json.dumps(summary, indent=2))
     fits = ", ".join(f"{o} {result.fit_before[o]:.1f} -> {result.fit_after[o]:.1f} %"
                      for o in result.output_names)
@@ -115,7 +118,8 @@ def main() -> int:
         f"{load_before[0]:.1f} / {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs (other "
         f"processes share them); the round's refits on {workers} worker process(es); CPU time "
         f"of the diagnosis (this process and its workers) {cpu:.1f} s.\n")
-    print(f"diagnosis of {args.duration:g} s, 3 outputs: {wall:.1f} s; verdict {result.verdict} "
+    print(f"diagnosis of {args.duration:g} s, 3 outputs: {wall:.1f} s wall, {cpu:.1f} s CPU; "
+          f"verdict {result.verdict} "
           f"{list(result.effects)}; {fits}")
     return 0
 
