@@ -5,16 +5,20 @@ vocabulary), nominal ``linear-2``. The challenge returns the play term when the 
 gained less on the withheld run than it does, and leaves them standing when they gained more."""
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from scipy import signal
 
-from panto.identification.diagnosis.discovery import DiscoveryOptions, play, term_library
+from panto.identification.diagnosis.discovery import (DiscoveryOptions, Signal, Term, discover,
+                                                      play, term_library)
 from panto.identification.diagnosis.nominal import fit_nominal
-from panto.identification.diagnosis.pipeline import CHALLENGE, CHALLENGERS, _challenge
+from panto.identification.diagnosis.pipeline import CHALLENGE, CHALLENGERS, _challenge, challenger
 from panto.identification.diagnosis.refit import Model
 from panto.identification.diagnosis.support import build_structure
-from panto.identification.estimation.base import IdentificationData, IdentificationError
+from panto.identification.estimation.base import (IdentificationData, IdentificationError,
+                                                  ModelStructure)
 
 RATE = 50.0
 
@@ -75,3 +79,43 @@ def test_the_challenge_searches_only_its_families(backlash):
         assert t.family != "abs" or s.min() < t.width < s.max()
     with pytest.raises(IdentificationError, match="families"):
         DiscoveryOptions(families=("hysteron",))
+
+
+class _TwoSensors(ModelStructure):
+    """The second-order plant read by two sensors, ``y`` and ``z``, both nominally ``y``."""
+
+    name = "two-sensors"
+    input_names = ("u",)
+    output_names = ("y", "z")
+    parameter_names = ("K",)
+
+    def nominal(self):
+        return {"K": 1.0}
+
+    def bounds(self):
+        return {"K": (0.01, 100.0)}
+
+    def simulate(self, parameters, data):
+        bd, ad = signal.bilinear([36.0 * parameters["K"]], [1.0, 3.0, 36.0], fs=RATE)
+        y = signal.lfilter(bd, ad, data.inputs[:, 0])
+        return np.column_stack([y, y])
+
+
+def test_a_challenger_is_a_sensor_characteristic_or_a_hysteresis():
+    """Sensor z has backlash; the terms ranked for z are made of z's own simulation, or a play
+    of the input, never of y's simulation (which here equals z's) nor a kink of the input."""
+    runs = []
+    for seed in (1, 2):
+        one = _run(seed, 0.0)
+        z = play(one.outputs[:, 0], 0.4)
+        runs.append(IdentificationData(one.time, one.inputs, np.column_stack([one.outputs[:, 0], z]),
+                                       ("u",), ("y", "z")))
+    hypothesis = discover(_TwoSensors(), {"K": 1.0}, ("K",), *runs,
+                          options=DiscoveryOptions(**{**CHALLENGE, "candidates": 2}))
+    assert hypothesis is not None and hypothesis.output == "z" and hypothesis.gain > 1.0
+    ranked = [formula for output, formula, _ in hypothesis.ranking if output == "z"]
+    assert ranked and all(f.startswith(("play(z", "|z", "play(u")) for f in ranked), ranked
+    u_term, y_term = (Term(family, (Signal(role, name),), 0.1) for family, role, name in
+                      (("abs", "input", "u"), ("play", "output", "y")))
+    assert not challenger(u_term, "z") and not challenger(y_term, "z")
+    assert challenger(replace(y_term, signals=(Signal("output", "z"),)), "z")

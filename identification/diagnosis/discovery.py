@@ -102,6 +102,9 @@ class DiscoveryOptions:
         The term families searched (a subset of :data:`FAMILIES`; default all).
     derivatives : bool
         Whether the signals' time derivatives are candidate signals.
+    admit : callable, optional
+        ``admit(term, output) -> bool``: whether `term` may be added to `output` (None: every
+        term of the library).
     """
 
     delays: tuple[int, ...] = (2, 5, 10)
@@ -120,6 +123,7 @@ class DiscoveryOptions:
     max_evaluations: int = 600
     families: tuple[str, ...] = FAMILIES
     derivatives: bool = True
+    admit: Callable[[Term, str], bool] | None = None
 
     def __post_init__(self) -> None:
         problems = [f"solver {self.solver!r} is not 'omp' or 'lasso-bic'"
@@ -514,9 +518,13 @@ def discover(structure: ModelStructure, parameters: Mapping[str, float], free: S
     ranked: dict[str, list[tuple[Term, float]]] = {}
     for output in train.output_names:
         own = simulated[:, list(names).index(output)]
-        ranked[output] = [(_centred(_own_term(library[k], output), train, simulated, names), c)
-                          for k, c in rank_terms(train.output(output) - own, columns, own,
-                                                    options)]
+        allowed = [k for k, t in enumerate(library)
+                   if options.admit is None or options.admit(t, output)]
+        if not allowed:
+            continue
+        ranked[output] = [
+            (_centred(_own_term(library[allowed[k]], output), train, simulated, names), c)
+            for k, c in rank_terms(train.output(output) - own, columns[:, allowed], own, options)]
     refit = _Refit(structure, parameters, tuple(free), train, validation, options, executor, say)
     singles = [(refit.run(output, [terms[i][0]]), output, i) for output, terms in ranked.items()
                for i in range(min(options.candidates, len(terms)))]

@@ -49,9 +49,9 @@ causes it, and how far the gap shrinks once that effect is in the model.
    effect's parameters with their standard deviations.
 
 5. **Challenge.** When effects were accepted and a significant gap remains, the out-of-vocabulary
-   mechanisms of the discovery library (a play operator: hysteresis, backlash; kinks ``|s - c|``:
-   a sign-blind sensor; of the inputs and the nominal's simulated outputs) are refitted in the
-   nominal (:func:`_challenge`). When the best of them gains more validation fit points on its
+   mechanisms of the discovery library (a play operator of an input or of the output's own
+   simulation: hysteresis, backlash; kinks ``|s - c|`` of the output's own simulation: a
+   sign-blind sensor) are refitted in the nominal (:func:`_challenge`). When the best of them gains more validation fit points on its
    output than the accepted effects gain on any output, no effect is named: the vocabulary's best
    closed only part of a gap that something outside it explains better (a hysteresis is not an
    actuator lag because a lag closes a tenth of its gap).
@@ -246,7 +246,7 @@ class DiagnosisOptions:
     (:mod:`~panto.identification.diagnosis.discovery`)."""
     challenge: bool = True
     """When effects were accepted but a significant gap remains, challenge them with the
-    out-of-vocabulary mechanisms of the discovery library (:data:`CHALLENGERS`: a play operator
+    out-of-vocabulary mechanisms of the discovery library (:func:`challenger`: a play operator
     for hysteresis and backlash, kinks ``|s - c|`` for sign-blind sensors) refitted in the
     nominal: when the best of them gains more on the withheld run than the accepted effects do on
     any output, the verdict is ``unexplained`` with that term as the hypothesis
@@ -541,21 +541,36 @@ def _discovery(model: Model, train: IdentificationData, validation: Identificati
 
 
 #: Term families of the discovery library no effect of the vocabulary represents: the play
-#: operator (hysteresis, backlash) and kinks ``|s - c|`` (a sign-blind sensor), of the inputs and
-#: the nominal's simulated outputs as they are (not delayed, not differentiated: a delayed
-#: output is a lag, which the vocabulary has).
+#: operator (hysteresis, backlash) and kinks ``|s - c|`` (a sign-blind sensor).
 CHALLENGERS = ("play", "abs")
-#: The challenge's :class:`~panto.identification.diagnosis.discovery.DiscoveryOptions`:
-#: :data:`CHALLENGERS` of undelayed, underived signals, kinks at every twentieth quantile (a
-#: sensor's zero can lie anywhere in the signal's range).
-CHALLENGE = {"families": CHALLENGERS, "delays": (), "derivatives": False,
+
+
+def challenger(term: Any, output: str) -> bool:
+    """Whether a discovery term may challenge the accepted effects on `output`: a play (hysteresis,
+    backlash) of an input or of the output's own simulation, a kink of the output's own
+    simulation (a sensor characteristic), as they are. Not a kink of an input (the vocabulary has
+    the input's static nonlinearities: dead zone, saturation; tuning split, cubic_stiffness/17:
+    ``|eta - c|`` beat the cubic's 6.6 points), not of another output (a path between outputs
+    the nominal lacks: held-out 830, a play of F_c on y_cb beat a true actuator lag), not delayed
+    or differentiated (a delayed output is a lag)."""
+    x = term.signals[0]
+    own = x.role == "output" and x.name == output
+    plain = len(term.signals) == 1 and not x.delay and not x.derivative
+    return plain and term.family in CHALLENGERS and (own or term.family == "play" and
+                                                     x.role == "input")
+
+
+#: The challenge's :class:`~panto.identification.diagnosis.discovery.DiscoveryOptions`: the
+#: :func:`challenger` terms, kinks at every twentieth quantile (a sensor's zero can lie anywhere
+#: in the signal's range).
+CHALLENGE = {"families": CHALLENGERS, "delays": (), "derivatives": False, "admit": challenger,
              "kink_quantiles": tuple(k / 20 for k in range(1, 20))}
 
 
 def _challenge(nominal: Model, train: IdentificationData, validation: IdentificationData,
                fit_before: Mapping[str, float], fit_after: Mapping[str, float], executor: Any,
                progress: Progress | None) -> dict[str, Any] | None:
-    """The best out-of-vocabulary term (:data:`CHALLENGERS`) refitted in the nominal, when it
+    """The best out-of-vocabulary term (:func:`challenger`) refitted in the nominal, when it
     gains more validation fit points on its output than the accepted effects gain on any output
     (:attr:`DiagnosisOptions.challenge`); None otherwise. A hysteresis is not an actuator lag
     because a lag closes part of its gap: the vocabulary's best is named only when nothing outside
