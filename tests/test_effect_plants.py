@@ -225,3 +225,15 @@ def test_scores_follow_the_labels(harness):
     right = harness.score({**base, "label": "dead_zone", "verdict": "effect",
                            "effects": ["dead_zone", "offset"]})
     assert right["correct"] and right["gap_closed_main"] == 0.9 and right["strong"]
+
+
+def test_the_reproducible_gap_median_leaves_out_only_the_unreproducible_runs(harness):
+    def case(gap, reproducible):
+        return harness.score({"strongest": 5.0, "gap_closed": {"F_c": gap},
+                              "detectability": {"F_c": 5.0}, "label": "contact_loss",
+                              "verdict": "effect", "effects": ["contact_loss"],
+                              "reproducible": reproducible})
+
+    summary = harness.summarise([case(0.9, True), case(0.8, True), case(0.02, False)])
+    assert summary["gap_closed_median_named_strong"] == pytest.approx(0.8)
+    assert summary["gap_closed_median_named_strong_reproducible"] == pytest.approx(0.85)
