@@ -40,7 +40,9 @@ to second order (:func:`_within`). Because the right-hand side is continuous (th
 is zero at the switch), this leaves a local error of order ``h^3`` per switch (rounding the
 switch to the sub-step grid left ``h^2``, and a state that jumps with the parameters whenever a
 switch moves across a grid point). A flight shorter than one sub-step, beginning and ending
-inside it, is not seen.
+inside it, is not seen. The run in contact and the switched recursion run compiled where a C
+compiler is available (:mod:`panto.identification.diagnosis.contact_kernel`: the same
+recursion to rounding, ~4 times faster; ``PANTO_CONTACT_KERNEL=0`` keeps the NumPy path).
 
 Sub-step length (:class:`UnilateralContact`): ``M`` is :data:`SUBSTEPS`, or large enough that
 ``h`` is at most ``max_substep`` when one is given (at most :data:`MOST_SUBSTEPS` per sample). A head that bounces on the wire (the contact spring's mode,
@@ -67,6 +69,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from panto.identification.diagnosis import contact_kernel
 from panto.identification.estimation.base import IdentificationError, ModelStructure
 from panto.identification.structures.linearisation import expm, propagate
 
@@ -157,27 +160,31 @@ class _Mode:
 
     maps: np.ndarray      # (M, n, n + 2m): x((j + 1) h) = maps[j] @ z
     rows: np.ndarray      # (M, n + 2m): c_F maps[j], the force's state part at those instants
-    drive: np.ndarray     # (N - 1, n): the whole sample's input part
-    offsets: np.ndarray   # (N - 1, M): the rest of g at the sub-step instants of each sample
+    drive: np.ndarray | None    # (N - 1, n): the whole sample's input part (None: lazy)
+    offsets: np.ndarray | None  # (N - 1, M): the rest of g at the sub-step instants (None: lazy)
     phi: np.ndarray       # (n, n): the whole sample's state transition
     rows_x: np.ndarray    # (M, n): the state part of `rows`
     kick: np.ndarray      # (n, 2): b_c and A b_c, the switch's share of a sub-step (_within)
 
 
 def _prepare(matrices: tuple[np.ndarray, np.ndarray], model: ContactModel, u: np.ndarray,
-             slope: np.ndarray, period: float, substeps: int) -> _Mode:
-    """One mode's maps for `matrices` ``(A, B)``, inputs `u` and their slopes (per second)."""
+             slope: np.ndarray, period: float, substeps: int, lazy: bool = False) -> _Mode:
+    """One mode's maps for `matrices` ``(A, B)``, inputs `u` and their slopes (per second);
+    `lazy`: without ``drive`` and ``offsets`` (the compiled kernel computes the samples it
+    needs)."""
     a, b = matrices
     c_force, d_force = model.c_force, model.d_force
     n, m = b.shape
     maps = _tables(a, b, period, substeps)[:, :n, :]
     rows = c_force @ maps
+    kick = np.column_stack([model.column, a @ model.column])
+    if lazy:
+        return _Mode(maps, rows, None, None, maps[-1, :, :n].copy(), rows[:, :n].copy(), kick)
     instants = np.arange(1, substeps + 1) * (period / substeps)
     offsets = (u[:-1] @ (rows[:, n:n + m] + d_force).T + slope @ rows[:, n + m:].T
                + (slope @ d_force)[:, None] * instants[None, :])
     drive = u[:-1] @ maps[-1, :, n:n + m].T + slope @ maps[-1, :, n + m:].T
-    return _Mode(maps, rows, drive, offsets, maps[-1, :, :n].copy(), rows[:, :n].copy(),
-                 np.column_stack([model.column, a @ model.column]))
+    return _Mode(maps, rows, drive, offsets, maps[-1, :, :n].copy(), rows[:, :n].copy(), kick)
 
 
 def simulate_switched(model: ContactModel, u: np.ndarray, x0: np.ndarray, period: float, *,
@@ -202,16 +209,20 @@ def simulate_switched(model: ContactModel, u: np.ndarray, x0: np.ndarray, period
         raise IdentificationError(f"switched simulation: hold {hold!r}, substeps {substeps}, "
                                   f"{len(u)} samples")
     slope = np.diff(u, axis=0) / period if hold == "foh" else np.zeros((len(u) - 1, u.shape[1]))
-    modes = [_prepare(matrices, model, u, slope, period, substeps) for matrices in _modes(model)]
+    matrices = _modes(model)
+    contact = _prepare(matrices[IN_CONTACT], model, u, slope, period, substeps)
     c_force, d_force = model.c_force, model.d_force
-    contact = modes[IN_CONTACT]
     with np.errstate(over="ignore", invalid="ignore"):  # a diverging run is refused below
-        states = propagate(contact.phi, contact.drive, x0)
+        states = contact_kernel.propagate(contact.phi, contact.drive, x0)
+        if states is None:
+            states = propagate(contact.phi, contact.drive, x0)
         inside = states[:-1] @ contact.rows_x.T + contact.offsets
     g = states @ c_force + u @ d_force
     lost = np.flatnonzero((inside < 0.0).any(axis=1) | (g[:-1] < 0.0))
     if len(lost) == 0:
         return SwitchedRun(states, np.maximum(g, 0.0), np.ones(len(u), bool), False)
+    lazy = contact_kernel.active_backend() == "compiled"  # the flight's tables where needed
+    modes = [contact, _prepare(matrices[IN_FLIGHT], model, u, slope, period, substeps, lazy)]
     with np.errstate(over="ignore", invalid="ignore"):
         _run_switched(modes, states, u, slope, int(lost[0]), c_force, d_force, period / substeps)
     g = states @ c_force + u @ d_force
@@ -230,15 +241,28 @@ def _run_switched(modes: list[_Mode], states: np.ndarray, u: np.ndarray, slope: 
     recursion ``x[k+1] = Phi x[k] + drive[k]``), so any stretch in contact from state ``x`` at
     sample ``k`` is ``x[k+j] = X[k+j] + Phi^j (x - X[k])`` (the mode is stable: ``X`` stays
     bounded); in flight (which need not be stable) ``x[k+j] = Phi^j x + sum_{i<j} Phi^{j-1-i}
-    drive[k+i]`` over at most :data:`FLIGHT_STRETCH` samples (:func:`_flight_maps`). A stretch is
+    drive[k+i]`` over at most :data:`FLIGHT_STRETCH` samples (:func:`_convolution`). A stretch is
     taken at once, the force at the sub-step instants of all its samples checked at once, and
     the stretch kept up to the first sample whose force changes sign, which :func:`_within` runs
     across the switch. The same recursion as sample after sample, to rounding, without a Python
-    step per sample."""
+    step per sample. The compiled kernel (:mod:`~panto.identification.diagnosis.contact_kernel`)
+    runs the same recursion where it is available, else :func:`_switched_numpy`."""
+    powers = _powers(modes[IN_CONTACT].phi, STRETCH), _powers(modes[IN_FLIGHT].phi, FLIGHT_STRETCH)
+    if not contact_kernel.run_switched(modes, states, u, slope, start, c_force, d_force, h, powers):
+        _switched_numpy(modes, states, u, slope, start, c_force, d_force, h, powers)
+    if not np.all(np.isfinite(states)):
+        raise IdentificationError("switched simulation diverged (unilateral contact)")
+
+
+def _switched_numpy(modes: list[_Mode], states: np.ndarray, u: np.ndarray, slope: np.ndarray,
+                    start: int, c_force: np.ndarray, d_force: np.ndarray, h: float,
+                    powers: tuple[np.ndarray, np.ndarray]) -> None:
+    """The NumPy loop of :func:`_run_switched` with the powers ``Phi^j`` of both modes: the
+    reference the compiled kernel follows."""
     n, last = states.shape[1], len(u) - 1
     bilateral = states.copy()
-    powers = _powers(modes[IN_CONTACT].phi, STRETCH)
-    flight_powers, convolution = _flight_maps(modes[IN_FLIGHT].phi, FLIGHT_STRETCH)
+    powers, flight_powers = powers
+    convolution = _convolution(flight_powers)
     x = states[start].copy()
     mode = IN_CONTACT if float(c_force @ x + d_force @ u[start]) >= 0.0 else IN_FLIGHT
     k = start
@@ -264,8 +288,6 @@ def _run_switched(modes: list[_Mode], states: np.ndarray, u: np.ndarray, slope: 
         x, mode = _within(modes, mode, z, int(np.argmax(wrong[i])), g[i], c_force, d_force, h, n)
         k += i + 1
         states[k] = x
-    if not np.all(np.isfinite(states)):
-        raise IdentificationError("switched simulation diverged (unilateral contact)")
 
 
 def _powers(phi: np.ndarray, count: int) -> np.ndarray:
@@ -277,14 +299,13 @@ def _powers(phi: np.ndarray, count: int) -> np.ndarray:
     return powers
 
 
-def _flight_maps(phi: np.ndarray, count: int) -> tuple[np.ndarray, np.ndarray]:
-    """``Phi^j`` (:func:`_powers`) and the convolution ``T[j - 1, i] = Phi^(j-1-i)`` for
-    ``i < j`` (zero otherwise), ``j = 1..count``: ``x[k+j] = Phi^j x[k] + sum_i T[j-1, i]
-    drive[k+i]``."""
-    powers = _powers(phi, count)
+def _convolution(powers: np.ndarray) -> np.ndarray:
+    """From ``Phi^j``, ``j = 0..count`` (:func:`_powers`), the convolution ``T[j - 1, i] =
+    Phi^(j-1-i)`` for ``i < j`` (zero otherwise), ``j = 1..count``: ``x[k+j] = Phi^j x[k] +
+    sum_i T[j-1, i] drive[k+i]``."""
+    count = len(powers) - 1
     lag = np.arange(count)[:, None] - np.arange(count)[None, :]
-    convolution = np.where((lag >= 0)[:, :, None, None], powers[np.clip(lag, 0, count)], 0.0)
-    return powers, convolution
+    return np.where((lag >= 0)[:, :, None, None], powers[np.clip(lag, 0, count)], 0.0)
 
 
 def _within(modes: list[_Mode], mode: int, z: np.ndarray, first: int, g: np.ndarray,
