@@ -119,3 +119,18 @@ def test_a_challenger_is_a_sensor_characteristic_or_a_hysteresis():
                       (("abs", "input", "u"), ("play", "output", "y")))
     assert not challenger(u_term, "z") and not challenger(y_term, "z")
     assert challenger(replace(y_term, signals=(Signal("output", "z"),)), "z")
+
+
+def test_the_refits_side_by_side_give_the_serial_hypothesis(backlash):
+    from concurrent.futures import ProcessPoolExecutor
+
+    model, train, validation = backlash
+    lines = {"serial": [], "pool": []}
+    serial = discover(model.structure, model.parameters, model.free, train, validation,
+                      options=DiscoveryOptions(**CHALLENGE), progress=lines["serial"].append)
+    with ProcessPoolExecutor(2) as pool:
+        parallel = discover(model.structure, model.parameters, model.free, train, validation,
+                            options=DiscoveryOptions(**CHALLENGE), progress=lines["pool"].append,
+                            pool=pool)
+    assert serial is not None and parallel.to_dict() == serial.to_dict()
+    assert lines["pool"] == lines["serial"]  # the workers' progress replayed in order

@@ -484,7 +484,8 @@ def _centred(term: Term, data: IdentificationData, simulated: np.ndarray,
 def discover(structure: ModelStructure, parameters: Mapping[str, float], free: Sequence[str],
              train: IdentificationData, validation: IdentificationData, *,
              options: DiscoveryOptions = DiscoveryOptions(), executor: Any = None,
-             progress: Callable[[str], None] | None = None) -> Hypothesis | None:
+             progress: Callable[[str], None] | None = None, pool: Any = None
+             ) -> Hypothesis | None:
     """Search the term library for what the nominal misses (module notes).
 
     Parameters
@@ -502,6 +503,9 @@ def discover(structure: ModelStructure, parameters: Mapping[str, float], free: S
         For the refits' Jacobians.
     progress : callable, optional
         Receives a line per refit.
+    pool : concurrent.futures.Executor, optional
+        Runs the single-term refits side by side (one task each; their progress lines are
+        replayed in order); the result is the serial one.
 
     Returns
     -------
@@ -526,8 +530,19 @@ def discover(structure: ModelStructure, parameters: Mapping[str, float], free: S
             (_centred(_own_term(library[allowed[k]], output), train, simulated, names), c)
             for k, c in rank_terms(train.output(output) - own, columns[:, allowed], own, options)]
     refit = _Refit(structure, parameters, tuple(free), train, validation, options, executor, say)
-    singles = [(refit.run(output, [terms[i][0]]), output, i) for output, terms in ranked.items()
-               for i in range(min(options.candidates, len(terms)))]
+    jobs = [(output, i, terms[i][0]) for output, terms in ranked.items()
+            for i in range(min(options.candidates, len(terms)))]
+    if pool is None:
+        singles = [(refit.run(output, [term]), output, i) for output, i, term in jobs]
+    else:
+        alone = replace(refit, say=None, executor=None)
+        futures = [pool.submit(_recorded, alone, output, [term]) for output, _, term in jobs]
+        singles = []
+        for (output, i, _), future in zip(jobs, futures):
+            hypothesis, lines = future.result()
+            for line in lines:
+                say(line)
+            singles.append((hypothesis, output, i))
     significant = [h for h in singles
                    if h[0] is not None and h[0].significant(options.significance)]
     if not significant:
@@ -544,6 +559,13 @@ def discover(structure: ModelStructure, parameters: Mapping[str, float], free: S
     say(f"discovery: {best.term} on {best.output}: validation fit "
         f"{best.fit_validation_before:.2f} -> {best.fit_validation_after:.2f} %")
     return best if best.gain > options.min_gain else None
+
+
+def _recorded(refit: "_Refit", output: str, terms: Sequence[Term]
+              ) -> tuple[Hypothesis | None, list[str]]:
+    """``refit.run(output, terms)`` with its progress lines recorded (a pool's task)."""
+    lines: list[str] = []
+    return replace(refit, say=lines.append).run(output, terms), lines
 
 
 @dataclass(frozen=True, eq=False)

@@ -321,17 +321,16 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
     if "global_fit" in result.details:
         say("diagnose: nominal " + result.details["global_fit"]["verdict"])
     before, analysis_before, gap, fit_before = _where(model, validation, roles, say)
-    with trial_pool(resolve_workers(options.workers), executor) as pool:
-        search = _search(model, before, candidates,
-                         Search(train, validation, roles, options, fit_options, say,
-                                 black_box_validation(adequacy, validation)), pool)
     nominal_model = model
-    model, current, rounds, steps, accepted = search
-    remaining_gap = _gap(model, validation, current, roles) if steps else gap
-    fit_after = fit_per_output(validation, current)
-    challenger = _challenge(nominal_model, train, validation, fit_before, fit_after, executor,
-                            progress) \
-        if steps and remaining_gap["significant"] and options.challenge else None
+    with trial_pool(resolve_workers(options.workers), executor) as pool:
+        model, current, rounds, steps, accepted = _search(
+            model, before, candidates, Search(train, validation, roles, options, fit_options, say,
+                                              black_box_validation(adequacy, validation)), pool)
+        remaining_gap = _gap(model, validation, current, roles) if steps else gap
+        fit_after = fit_per_output(validation, current)
+        challenger = _challenge(nominal_model, train, validation, fit_before, fit_after,
+                                executor, progress, pool) \
+            if steps and remaining_gap["significant"] and options.challenge else None
     if challenger is not None:  # the accepted effects yield to an out-of-vocabulary term
         model, current, steps, accepted, remaining_gap = nominal_model, before, [], [], gap
         fit_after = fit_per_output(validation, current)
@@ -569,12 +568,12 @@ CHALLENGE = {"families": CHALLENGERS, "delays": (), "derivatives": False, "admit
 
 def _challenge(nominal: Model, train: IdentificationData, validation: IdentificationData,
                fit_before: Mapping[str, float], fit_after: Mapping[str, float], executor: Any,
-               progress: Progress | None) -> dict[str, Any] | None:
+               progress: Progress | None, pool: Any = None) -> dict[str, Any] | None:
     """The best out-of-vocabulary term (:func:`challenger`) refitted in the nominal, when it
     gains more validation fit points on its output than the accepted effects gain on any output
     (:attr:`DiagnosisOptions.challenge`); None otherwise. A hysteresis is not an actuator lag
     because a lag closes part of its gap: the vocabulary's best is named only when nothing outside
-    it explains the withheld run better."""
+    it explains the withheld run better. The single-term refits run side by side on `pool`."""
     from panto.identification.diagnosis.discovery import DiscoveryOptions, discover
 
     gained = max(fit_after[o] - fit_before[o] for o in fit_before)
@@ -584,7 +583,7 @@ def _challenge(nominal: Model, train: IdentificationData, validation: Identifica
     try:
         hypothesis = discover(nominal.structure, nominal.parameters, nominal.free, train,
                               validation, options=DiscoveryOptions(**CHALLENGE),
-                              executor=executor, progress=indented(progress))
+                              executor=executor, progress=indented(progress), pool=pool)
     except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError) as error:
         if progress:
             progress(f"diagnose: challenge failed ({error}); the accepted effects stand")
