@@ -329,7 +329,7 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
         remaining_gap = _gap(model, validation, current, roles) if steps else gap
         fit_after = fit_per_output(validation, current)
         challenger = _challenge(nominal_model, train, validation, fit_before, fit_after,
-                                executor, progress, pool) \
+                                executor, progress, pool, options.max_evaluations) \
             if steps and remaining_gap["significant"] and options.challenge else None
     if challenger is not None:  # the accepted effects yield to an out-of-vocabulary term
         model, current, steps, accepted, remaining_gap = nominal_model, before, [], [], gap
@@ -568,21 +568,25 @@ CHALLENGE = {"families": CHALLENGERS, "delays": (), "derivatives": False, "admit
 
 def _challenge(nominal: Model, train: IdentificationData, validation: IdentificationData,
                fit_before: Mapping[str, float], fit_after: Mapping[str, float], executor: Any,
-               progress: Progress | None, pool: Any = None) -> dict[str, Any] | None:
+               progress: Progress | None, pool: Any = None,
+               max_evaluations: int | None = None) -> dict[str, Any] | None:
     """The best out-of-vocabulary term (:func:`challenger`) refitted in the nominal, when it
     gains more validation fit points on its output than the accepted effects gain on any output
     (:attr:`DiagnosisOptions.challenge`); None otherwise. A hysteresis is not an actuator lag
     because a lag closes part of its gap: the vocabulary's best is named only when nothing outside
-    it explains the withheld run better. The single-term refits run side by side on `pool`."""
+    it explains the withheld run better. The single-term refits run side by side on `pool`, each
+    with `max_evaluations` simulations (the candidates' budget,
+    :attr:`DiagnosisOptions.max_evaluations`: the same competition; None: the discovery's)."""
     from panto.identification.diagnosis.discovery import DiscoveryOptions, discover
 
     gained = max(fit_after[o] - fit_before[o] for o in fit_before)
+    budget = {} if max_evaluations is None else {"max_evaluations": int(max_evaluations)}
     if progress:
         progress(f"diagnose: a significant gap remains after the accepted effects (validation "
                  f"+{gained:.2f} points at most): challenging them with out-of-vocabulary terms")
     try:
         hypothesis = discover(nominal.structure, nominal.parameters, nominal.free, train,
-                              validation, options=DiscoveryOptions(**CHALLENGE),
+                              validation, options=DiscoveryOptions(**budget, **CHALLENGE),
                               executor=executor, progress=indented(progress), pool=pool)
     except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError) as error:
         if progress:
