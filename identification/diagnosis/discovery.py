@@ -9,7 +9,7 @@ the training run:
    :attr:`DiscoveryOptions.smoothing`), and each of these delayed by a few samples
    (:attr:`DiscoveryOptions.delays`).
 2. **Term library** ``phi``: ``s^2``, ``s^3``, ``|s|`` (of a signal on both sides of zero;
-   else it is linear), ``s|s|``, ``tanh(s / eps)`` (a smooth sign,
+   else it is linear; so are the kinks below), ``s|s|``, ``tanh(s / eps)`` (a smooth sign,
    ``eps`` a fraction of the signal's standard deviation) of every signal; the delayed signals
    themselves; products ``s_i s_j`` of the undelayed signals; and of every undelayed input and
    output kinks ``|s - c|`` at a few of its quantiles (where a sign-blind sensor's zero lies
@@ -296,8 +296,8 @@ def term_library(structure: ModelStructure, data: IdentificationData, simulated:
             terms.append(Term("delay", (x,)))
         elif not x.derivative:
             extent = float(np.ptp(values[x]))
-            terms += [Term("abs", (x,), float(np.quantile(values[x], q)), unit)
-                      for q in options.kink_quantiles]
+            kinks = [float(np.quantile(values[x], q)) for q in options.kink_quantiles]
+            terms += [Term("abs", (x,), c, unit) for c in kinks if _crosses(values[x], c)]
             terms += [Term("play", (x,), r * extent, unit) for r in options.play_radii]
             terms += [Term("memory", (x,), tau, "s") for tau in options.memory_time_constants]
     if options.products:
@@ -532,7 +532,7 @@ def discover(structure: ModelStructure, parameters: Mapping[str, float], free: S
     refit = _Refit(structure, parameters, tuple(free), train, validation, options, executor, say)
     jobs = [(output, i, terms[i][0]) for output, terms in ranked.items()
             for i in range(min(options.candidates, len(terms)))]
-    if pool is None:
+    if pool is None or len(jobs) < 2:
         singles = [(refit.run(output, [term]), output, i) for output, i, term in jobs]
     else:
         alone = replace(refit, say=None, executor=None)

@@ -65,7 +65,9 @@ from __future__ import annotations
 
 import math
 import dataclasses
+import pickle
 import time
+from concurrent.futures import BrokenExecutor
 from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
@@ -330,21 +332,23 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
         fit_after = fit_per_output(validation, current)
         challenger = _challenge(nominal_model, train, validation, fit_before, fit_after,
                                 executor, progress, pool, options.max_evaluations) \
-            if steps and remaining_gap["significant"] and options.challenge else None
+            if options.challenge and steps and gap["significant"] and \
+            remaining_gap["significant"] and _converged(
+                adequacy or adequacy_quietly(nominal, result, train), say) else None
+    withdrawn = accepted if challenger is not None else []
     if challenger is not None:  # the accepted effects yield to an out-of-vocabulary term
         model, current, steps, accepted, remaining_gap = nominal_model, before, [], [], gap
         fit_after = fit_per_output(validation, current)
+        rounds = _withdraw(rounds, withdrawn, challenger["yielded"])
     analysis_after = _analyse(validation, current, model, roles) if steps else analysis_before
-    verdict = "effect" if steps else ("unexplained" if gap["significant"] or challenger
-                                      else "none")
+    verdict = "effect" if steps else ("unexplained" if gap["significant"] else "none")
     where = where_summary(analysis_before, validation)
-    summary = _summary(verdict, accepted, fit_before, fit_after, where, remaining_gap, gap) + \
+    summary = (_summary(verdict, accepted, fit_before, fit_after, where, remaining_gap, gap)
+               if challenger is None else _yielded_summary(withdrawn, challenger, where)) + \
         "".join(f"; the runs cannot tell {s.effect} from {' or '.join(s.alternatives)} (withheld "
                 "gains within the folds' standard error, training dBIC within 10: a run exciting "
                 "where they differ would tell)" for s in steps if s.alternatives) + \
         _training_only_text(_training_only(rounds, accepted))
-    if challenger is not None:
-        summary += f" {challenger['yielded']}"
     hypothesis = challenger or (_discovery(model, train, validation, executor, progress,
                                            adequacy or adequacy_quietly(nominal, result, train))
                                 if verdict == "unexplained" and options.discovery else None)
@@ -566,6 +570,38 @@ CHALLENGE = {"families": CHALLENGERS, "delays": (), "derivatives": False, "admit
              "kink_quantiles": tuple(k / 20 for k in range(1, 20))}
 
 
+def _converged(adequacy: Any, say: Progress) -> bool:
+    """Whether the nominal may be challenged: not when a black box shows that it did not
+    converge (any term would absorb that misfit; :func:`_discovery` refuses it too)."""
+    if adequacy is not None and adequacy.verdict == "not converged":
+        say("diagnose: the accepted effects are not challenged: the nominal did not converge "
+            "(adequacy)")
+        return False
+    return True
+
+
+def _withdraw(rounds: Sequence[Mapping[str, Any]], withdrawn: Sequence[str], why: str
+              ) -> list[dict[str, Any]]:
+    """`rounds` with the trial each round accepted (``withdrawn[i]`` in round ``i``) marked
+    ``withdrawn`` with `why` (copies; the trials themselves are left alone)."""
+    out = []
+    for index, round_ in enumerate(rounds):
+        chosen = withdrawn[index] if index < len(withdrawn) else None
+        out.append({**round_, "tried": [
+            {**t, "withdrawn": why} if t.get("accepted") and t.get("effect") == chosen else t
+            for t in round_["tried"]]})
+    return out
+
+
+def _yielded_summary(withdrawn: Sequence[str], challenger: Mapping[str, Any],
+                     where: Mapping[str, Any]) -> str:
+    """The summary of a verdict the challenge turned: what was accepted, what it yielded to,
+    where the gap lies."""
+    return (f"{' then '.join(withdrawn)} passed the withheld tests but "
+            f"{challenger['yielded']}; the gap lies "
+            f"{where.get('text') or 'in the residual (no band or condition stands out)'}")
+
+
 def _challenge(nominal: Model, train: IdentificationData, validation: IdentificationData,
                fit_before: Mapping[str, float], fit_after: Mapping[str, float], executor: Any,
                progress: Progress | None, pool: Any = None,
@@ -588,7 +624,8 @@ def _challenge(nominal: Model, train: IdentificationData, validation: Identifica
         hypothesis = discover(nominal.structure, nominal.parameters, nominal.free, train,
                               validation, options=DiscoveryOptions(**budget, **CHALLENGE),
                               executor=executor, progress=indented(progress), pool=pool)
-    except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError) as error:
+    except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError,
+            BrokenExecutor, pickle.PicklingError) as error:  # an optional check: never fatal
         if progress:
             progress(f"diagnose: challenge failed ({error}); the accepted effects stand")
         return None
@@ -601,11 +638,11 @@ def _challenge(nominal: Model, train: IdentificationData, validation: Identifica
     report = hypothesis.to_dict()
     report["summary"] = _hypothesis_text(report)
     report["yielded"] = (
-        f"The vocabulary's best gained at most {gained:.2f} validation fit points on an output; "
+        f"gained at most {gained:.2f} validation fit points on an output, and "
         f"{hypothesis.term}, outside the vocabulary, gains {hypothesis.gain:.2f} on "
-        f"{hypothesis.output}: no effect of the vocabulary is named.")
+        f"{hypothesis.output}: no effect of the vocabulary is named")
     if progress:
-        progress("diagnose: " + report["yielded"])
+        progress("diagnose: the accepted effects " + report["yielded"])
     return report
 
 

@@ -106,7 +106,9 @@ def _which_blocks(diagnosis: Any) -> list[dict]:
                        t.table(["effect", "variant", "ERR", "significant"], rows)]
         rows = [[x["effect"], x["description"], x["delta_bic"], x["significance"],
                  x["improvement"], x["fold_spread"],
-                 t.cell("accepted", "ok") if x["accepted"] else rejection(x)]
+                 (t.cell("accepted, then withdrawn: " + x["withdrawn"], "mark")
+                  if x.get("withdrawn") else t.cell("accepted", "ok")) if x["accepted"]
+                 else rejection(x)]
                 for x in round_["tried"]]
         blocks.append(t.table(["effect", "augmentation", "ΔBIC", "|θ|/σ",
                                "validation gain [points]", "fold spread", "decision"], rows))
