@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from panto.identification.diagnosis import contact_kernel
+from panto.identification.diagnosis import contact_kernel, unilateral_contact
 from panto.identification.diagnosis.unilateral_contact import (ContactModel, UnilateralContact,
                                                                contact_column, resting_state,
                                                                simulate_switched)
@@ -50,12 +50,14 @@ def _problem(structure, parameters, data):
     return model, u, resting_state(model, x0, u[0])
 
 
-def _both(monkeypatch, model, u, x0, hold, substeps):
-    """The compiled and the NumPy run of the same problem."""
+def _both(monkeypatch, model, u, x0, hold, substeps, period=PERIOD):
+    """The compiled and the NumPy run of the same problem (the first checked to be compiled)."""
+    monkeypatch.delenv(contact_kernel.SWITCH_VARIABLE, raising=False)
     runs = []
     for compiled in (True, False):
         monkeypatch.setattr(contact_kernel, "USE_COMPILED", compiled)
-        runs.append(simulate_switched(model, u, x0, PERIOD, hold=hold, substeps=substeps))
+        assert contact_kernel.active_backend() == ("compiled" if compiled else "numpy")
+        runs.append(simulate_switched(model, u, x0, period, hold=hold, substeps=substeps))
     return runs
 
 
@@ -96,14 +98,54 @@ def test_the_kernel_follows_the_numpy_recursion(regime, substeps, hold, monkeypa
 
 @needs_kernel
 def test_a_bouncing_oscillator_head_many_switches(monkeypatch):
-    """The three-mass oscillator's light head on a fast slider: switches in many samples, several
-    within one sample (the kernel's sub-step loop across switches)."""
+    """The three-mass oscillator's light head on a fast slider: switches in many samples."""
     model, u, x0 = _problem(OscillatorStructure(3, outputs=OUTPUTS), OSCILLATOR | {"c3": 150.0},
                             _slider(0.01, 6.0))
     compiled, reference = _both(monkeypatch, model, u, x0, "foh", 32)
     _assert_close(compiled, reference, model, u)
     switches = np.count_nonzero(np.diff(reference.in_contact.astype(int)))
     assert switches >= 40, switches
+
+
+@needs_kernel
+def test_a_head_that_leaves_and_meets_the_wire_within_one_sample(monkeypatch):
+    """The same head sampled three times coarser: in some samples it leaves the wire and meets
+    it again (the kernel's sub-step loop across a second switch), seen as a sample that ends in
+    the mode it started in."""
+    model, u, x0 = _problem(OscillatorStructure(3, outputs=OUTPUTS), OSCILLATOR | {"c3": 150.0},
+                            _slider(0.01, 6.0))
+    returns = []
+    original = unilateral_contact._within
+
+    def counted(modes, mode, *rest):
+        x, new = original(modes, mode, *rest)
+        returns.append(new == mode)
+        return x, new
+
+    monkeypatch.setattr(unilateral_contact, "_within", counted)
+    compiled, reference = _both(monkeypatch, model, u[::3], x0, "foh", 32, 3 * PERIOD)
+    assert any(returns), "no sample with two switches: the case does not test the loop"
+    _assert_close(compiled, reference, model, u[::3])
+
+
+def test_without_a_compiler_the_numpy_loop_runs(monkeypatch, tmp_path):
+    """No compiler and an empty kernel cache: no kernel, the NumPy loop, no error."""
+    from panto.fmu_src import c_kernels
+
+    model, u, x0 = _problem(PhysicalLinear(outputs=OUTPUTS), {}, _slider(0.015, 2.5))
+    monkeypatch.setattr(contact_kernel, "USE_COMPILED", False)
+    reference = simulate_switched(model, u, x0, PERIOD)
+    monkeypatch.setattr(contact_kernel, "USE_COMPILED", True)
+    monkeypatch.delenv(contact_kernel.SWITCH_VARIABLE, raising=False)
+    monkeypatch.setenv("PANTO_KERNEL_CACHE", str(tmp_path))
+    monkeypatch.setattr(c_kernels, "find_compiler", lambda: None)
+    contact_kernel.load_kernel.cache_clear()
+    try:
+        assert contact_kernel.active_backend() == "numpy"
+        run = simulate_switched(model, u, x0, PERIOD)
+    finally:
+        contact_kernel.load_kernel.cache_clear()
+    assert run.switched and np.array_equal(run.states, reference.states)
 
 
 def test_switched_off_the_numpy_loop_runs(monkeypatch):
@@ -132,3 +174,21 @@ def test_the_compiled_contact_run_is_the_recursion(monkeypatch):
     assert contact_kernel.active_backend() == "compiled"
     assert np.array_equal(states[0], x0)
     assert np.allclose(states[1:], states[:-1] @ phi.T + drive, rtol=1e-14, atol=1e-14)
+
+
+@needs_kernel
+def test_the_kernel_refuses_arrays_that_do_not_fit(monkeypatch):
+    """The C code reads its tables unchecked: a start outside the record or a table of the wrong
+    size is refused before the call."""
+    monkeypatch.delenv(contact_kernel.SWITCH_VARIABLE, raising=False)
+    model, u, x0 = _problem(PhysicalLinear(outputs=OUTPUTS), {}, _slider(0.015, 2.5))
+    uc = unilateral_contact
+    slope = np.diff(u, axis=0) / PERIOD
+    modes = [uc._prepare(matrices, model, u, slope, PERIOD, 8) for matrices in uc._modes(model)]
+    states = np.zeros((len(u), len(x0)))
+    powers = (uc._powers(modes[0].phi, 4), uc._powers(modes[1].phi, 4))
+    args = (model.c_force, model.d_force, PERIOD / 8, powers)
+    for start, rows in ((-1, len(u)), (len(u) - 1, len(u)), (0, len(u) - 1)):
+        with pytest.raises(ValueError, match="unilateral contact kernel"):
+            contact_kernel.run_switched(modes, states, u[:rows], slope, start, *args)
+    assert contact_kernel.run_switched(modes, states, u, slope, 0, *args)

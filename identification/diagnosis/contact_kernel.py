@@ -16,7 +16,7 @@ to ~1e-13 of their range, not bit for bit (``tests/test_contact_kernel.py`` stat
 tolerance). Measured on the 80 runs of a 60 s, 3050-sample rig record around the diagnosis
 speed benchmark's accepted contact-loss fit (12 % of the time in flight, ~60 switches): 1.55 ms
 per :func:`~panto.identification.diagnosis.unilateral_contact.simulate_switched` call against
-5.8-6.2 ms with the NumPy loop (one core), the states within 6e-14 of their size.
+5.2-6.2 ms with the NumPy loop (one core), the states within 6e-14 of their size.
 
 The kernel is compiled at first use by :mod:`panto.fmu_src.c_kernels` (``$CC``, ``cc`` or
 ``gcc``) into ``$PANTO_KERNEL_CACHE`` or ``~/.cache/panto/kernels/<hash of the source>/``.
@@ -118,6 +118,29 @@ def propagate(phi: np.ndarray, drive: np.ndarray, x0: np.ndarray) -> np.ndarray 
     return states
 
 
+def _check_shapes(modes: list, states: np.ndarray, u: np.ndarray, slope: np.ndarray, start: int,
+                  c_force: np.ndarray, d_force: np.ndarray,
+                  powers: tuple[np.ndarray, np.ndarray]) -> None:
+    """Refuse arrays whose shapes do not fit each other (the C code reads them unchecked)."""
+    (count, n), m = states.shape, u.shape[1]
+    substeps = modes[0].rows.shape[0]
+    expected = {"u": (u.shape, (count, m)), "slope": (slope.shape, (count - 1, m)),
+                "c_force": (np.shape(c_force), (n,)), "d_force": (np.shape(d_force), (m,))}
+    for index, power in enumerate(powers):
+        expected[f"powers[{index}]"] = (power.shape, (len(power), n, n))
+    for index, mode in enumerate(modes):
+        shapes = {"maps": (substeps, n, n + 2 * m), "rows": (substeps, n + 2 * m),
+                  "rows_x": (substeps, n), "offsets": (count - 1, substeps),
+                  "drive": (count - 1, n), "kick": (n, 2)}
+        expected.update({f"mode {index} {name}": (getattr(mode, name).shape, shape)
+                         for name, shape in shapes.items() if getattr(mode, name) is not None})
+    wrong = [f"{name} {got} (expected {want})" for name, (got, want) in expected.items()
+             if tuple(got) != tuple(want)]
+    if len(modes) != 2 or not 0 <= int(start) < count - 1 or wrong:
+        raise ValueError(f"unilateral contact kernel: {len(modes)} modes, start {start} of "
+                         f"{count} samples; " + "; ".join(wrong))
+
+
 def _contiguous(array: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(array, dtype=float)
 
@@ -155,6 +178,7 @@ def run_switched(modes: list, states: np.ndarray, u: np.ndarray, slope: np.ndarr
         return False
     if not (states.flags.c_contiguous and states.dtype == float):
         raise ValueError("unilateral contact kernel: the states must be C-contiguous floats")
+    _check_shapes(modes, states, u, slope, start, c_force, d_force, powers)
     arrays = [getattr(mode, name) for mode in modes for name in TABLES]
     arrays = [None if a is None else _contiguous(a.T if name == "rows_x" else a)
               for a, name in zip(arrays, TABLES * len(modes))]
