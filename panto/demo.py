@@ -69,8 +69,8 @@ class DemoSettings:
         Effects the diagnosis may accept.
     diagnosis_light : bool
         A smoke-test diagnosis: the adequacy check's global refit with one data-driven start
-        (from a small frequency-response search) and no perturbations, and no discovery search
-        (the quick demo; the full one searches fully).
+        (from a small frequency-response search) and no perturbations, no discovery search and
+        no challenge of the accepted effects (the quick demo; the full one searches fully).
     doe_duration : float
         Length of the designed rig run [s].
     doe_population, doe_generations : int

@@ -139,7 +139,7 @@ def diagnose_gap(state: dict[str, Any], progress: Progress) -> dict:
         from panto.identification.estimation.global_fit import (FrequencyFitOptions,
                                                                   GlobalFitOptions)
 
-        limit.update(discovery=False, global_fit=GlobalFitOptions(
+        limit.update(discovery=False, challenge=False, global_fit=GlobalFitOptions(
             data_starts=1, perturbations=0, polish_evaluations=settings.max_evaluations or 300,
             frequency=FrequencyFitOptions(screening=32, starts=2, max_evaluations=500)))
     options = DiagnosisOptions(max_effects=settings.diagnosis_max_effects, **limit)

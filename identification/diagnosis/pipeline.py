@@ -252,7 +252,8 @@ class DiagnosisOptions:
     for hysteresis and backlash, kinks ``|s - c|`` for sign-blind sensors) refitted in the
     nominal: when the best of them gains more on the withheld run than the accepted effects do on
     any output, the verdict is ``unexplained`` with that term as the hypothesis
-    (:func:`_challenge`)."""
+    (:func:`_challenge`). Independent of :attr:`discovery` (which searches the whole library only
+    after an ``unexplained`` verdict): switch both off for the fastest diagnosis."""
     workers: int | None = None
     """Worker processes for a round's candidate refits (:mod:`~panto.identification.diagnosis.
     parallel`; the verdict is the serial one): by default the CPUs available (one inside a
