@@ -180,3 +180,14 @@ def test_a_kink_where_the_signal_has_a_floor_is_no_term():
              if t.signals[0].name == "u"]
     assert kinks and all(0.0 < c < u.max() for c in kinks)
     assert len(kinks) == sum(1 for q in options.kink_quantiles if np.quantile(u, q) > 0.0)
+
+
+def test_no_challenge_where_no_term_could_gain_more_than_the_effects(backlash):
+    """A fit cannot exceed 100 %: effects that gained more than the nominal's validation fit
+    leaves are not challenged at all (no refit, no hypothesis)."""
+    model, train, validation = backlash
+    before = _nominal_fit(model, validation)
+    lines = []
+    assert _challenge(model, train, validation, {"y": before}, {"y": 100.0 + 1e-9}, None,
+                      lines.append) is None
+    assert not any("refit" in line for line in lines) and "no output" in lines[-1]

@@ -484,8 +484,8 @@ def _centred(term: Term, data: IdentificationData, simulated: np.ndarray,
 def discover(structure: ModelStructure, parameters: Mapping[str, float], free: Sequence[str],
              train: IdentificationData, validation: IdentificationData, *,
              options: DiscoveryOptions = DiscoveryOptions(), executor: Any = None,
-             progress: Callable[[str], None] | None = None, pool: Any = None
-             ) -> Hypothesis | None:
+             progress: Callable[[str], None] | None = None, pool: Any = None,
+             outputs: Sequence[str] | None = None) -> Hypothesis | None:
     """Search the term library for what the nominal misses (module notes).
 
     Parameters
@@ -506,6 +506,8 @@ def discover(structure: ModelStructure, parameters: Mapping[str, float], free: S
     pool : concurrent.futures.Executor, optional
         Runs the single-term refits side by side (one task each; their progress lines are
         replayed in order); the result is the serial one.
+    outputs : sequence of str, optional
+        The outputs a term may be added to (default: every output of `train`).
 
     Returns
     -------
@@ -520,7 +522,8 @@ def discover(structure: ModelStructure, parameters: Mapping[str, float], free: S
         return None
     columns = np.column_stack([t.evaluate(train, simulated, names) for t in library])
     ranked: dict[str, list[tuple[Term, float]]] = {}
-    for output in train.output_names:
+    for output in (train.output_names if outputs is None else
+                   [o for o in train.output_names if o in outputs]):
         own = simulated[:, list(names).index(output)]
         allowed = [k for k, t in enumerate(library)
                    if options.admit is None or options.admit(t, output)]

@@ -611,20 +611,30 @@ def _challenge(nominal: Model, train: IdentificationData, validation: Identifica
     gains more validation fit points on its output than the accepted effects gain on any output
     (:attr:`DiagnosisOptions.challenge`); None otherwise. A hysteresis is not an actuator lag
     because a lag closes part of its gap: the vocabulary's best is named only when nothing outside
-    it explains the withheld run better. The single-term refits run side by side on `pool`, each
+    it explains the withheld run better. Only outputs whose nominal validation fit leaves more
+    than the effects' gain are searched (no fit exceeds 100 %: elsewhere no term could win). The
+    single-term refits run side by side on `pool`, each
     with `max_evaluations` simulations (the candidates' budget,
     :attr:`DiagnosisOptions.max_evaluations`: the same competition; None: the discovery's)."""
     from panto.identification.diagnosis.discovery import DiscoveryOptions, discover
 
     gained = max(fit_after[o] - fit_before[o] for o in fit_before)
     budget = {} if max_evaluations is None else {"max_evaluations": int(max_evaluations)}
+    # a fit cannot exceed 100 %: a term can beat the effects only where the nominal's
+    # validation fit leaves more than their gain
+    open_outputs = [o for o in fit_before if 100.0 - fit_before[o] > gained]
     if progress:
         progress(f"diagnose: a significant gap remains after the accepted effects (validation "
-                 f"+{gained:.2f} points at most): challenging them with out-of-vocabulary terms")
+                 f"+{gained:.2f} points at most): " + (
+                     f"challenging them with out-of-vocabulary terms on {', '.join(open_outputs)}"
+                     if open_outputs else "no output leaves a term room to gain more"))
+    if not open_outputs:
+        return None
     try:
         hypothesis = discover(nominal.structure, nominal.parameters, nominal.free, train,
                               validation, options=DiscoveryOptions(**budget, **CHALLENGE),
-                              executor=executor, progress=indented(progress), pool=pool)
+                              executor=executor, progress=indented(progress), pool=pool,
+                              outputs=open_outputs)
     except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError,
             BrokenExecutor, pickle.PicklingError) as error:  # an optional check: never fatal
         if progress:
