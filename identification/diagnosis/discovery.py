@@ -44,6 +44,7 @@ The result is a hypothesis, not a verdict: the diagnosis keeps ``unexplained``.
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field, fields, replace
 from typing import Any, Callable, Mapping, Sequence
@@ -52,6 +53,7 @@ import numpy as np
 from scipy import signal as sps
 from sklearn.linear_model import LassoLarsIC, lars_path, orthogonal_mp
 
+from panto.identification.diagnosis.parallel import map_replayed
 from panto.identification.estimation.base import (IdentificationData, IdentificationError,
                                                   ModelStructure, fit_percent)
 from panto.identification.estimation.least_squares import fit_least_squares
@@ -539,13 +541,9 @@ def discover(structure: ModelStructure, parameters: Mapping[str, float], free: S
         singles = [(refit.run(output, [term]), output, i) for output, i, term in jobs]
     else:
         alone = replace(refit, say=None, executor=None)
-        futures = [pool.submit(_recorded, alone, output, [term]) for output, _, term in jobs]
-        singles = []
-        for (output, i, _), future in zip(jobs, futures):
-            hypothesis, lines = future.result()
-            for line in lines:
-                say(line)
-            singles.append((hypothesis, output, i))
+        found = map_replayed(pool, functools.partial(_single, alone),
+                             [(output, term) for output, _, term in jobs], say)
+        singles = [(h, output, i) for h, (output, i, _) in zip(found, jobs)]
     significant = [h for h in singles
                    if h[0] is not None and h[0].significant(options.significance)]
     if not significant:
@@ -564,11 +562,12 @@ def discover(structure: ModelStructure, parameters: Mapping[str, float], free: S
     return best if best.gain > options.min_gain else None
 
 
-def _recorded(refit: "_Refit", output: str, terms: Sequence[Term]
-              ) -> tuple[Hypothesis | None, list[str]]:
-    """``refit.run(output, terms)`` with its progress lines recorded (a pool's task)."""
-    lines: list[str] = []
-    return replace(refit, say=lines.append).run(output, terms), lines
+def _single(refit: "_Refit", job: tuple[str, Term], say: Callable[[str], None]
+            ) -> Hypothesis | None:
+    """``refit.run(output, [term])`` for ``job = (output, term)``, saying to `say` (a pool's
+    task)."""
+    output, term = job
+    return replace(refit, say=say).run(output, [term])
 
 
 @dataclass(frozen=True, eq=False)

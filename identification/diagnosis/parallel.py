@@ -15,6 +15,7 @@ uses the cores) the default is one process, the search in-process.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import multiprocessing
 import os
 from concurrent.futures import Executor, ProcessPoolExecutor
@@ -106,23 +107,36 @@ def map_trials(function: Callable, model: Any, candidates: Sequence[Any], curren
         return [function(model, c, current, search) for c in candidates]
     quiet = dataclasses.replace(search, say=None,
                                 fit_options={**search.fit_options, "executor": None})
-    futures = [pool.submit(_recorded, function, model, c, current, quiet) for c in candidates]
+    return map_replayed(pool, functools.partial(_trial, function, model, current, quiet),
+                        candidates, search.say)
+
+
+def map_replayed(pool: Executor, task: Callable[[Any, Callable[[str], None]], Any],
+                 items: Sequence[Any], say: Callable[[str], None]) -> list[Any]:
+    """``[task(item, say) for item in items]`` on `pool`, one task per item: each task's
+    progress lines are recorded in its worker and given to `say` in the items' order (`task`
+    must pickle: a module-level function or a ``functools.partial`` of one)."""
+    futures = [pool.submit(_recorded, task, item) for item in items]
     results = []
     for future in futures:
         result, lines = future.result()
         for line in lines:
-            search.say(line)
+            say(line)
         results.append(result)
     return results
 
 
-def _recorded(function: Callable, model: Any, candidate: Any, current: Any, search: Any
-              ) -> tuple[Any, list[str]]:
-    """One task in a worker: the function's result and the progress lines it said."""
+def _trial(function: Callable, model: Any, current: Any, search: Any, candidate: Any,
+           say: Callable[[str], None]) -> Any:
+    """One candidate's trial with `say` as the search's progress sink."""
+    return function(model, candidate, current, dataclasses.replace(search, say=say))
+
+
+def _recorded(task: Callable, item: Any) -> tuple[Any, list[str]]:
+    """One task in a worker: its result and the progress lines it said."""
     lines: list[str] = []
-    result = function(model, candidate, current, dataclasses.replace(search, say=lines.append))
-    return result, lines
+    return task(item, lines.append), lines
 
 
 __all__ = ["available_cpus", "resolve_workers", "limit_threads", "trial_pool", "map_trials",
-           "THREAD_VARIABLES"]
+           "map_replayed", "THREAD_VARIABLES"]
