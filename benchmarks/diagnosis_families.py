@@ -207,8 +207,27 @@ def _systematic(gap: dict) -> dict:
     return {o: (v or {}).get("systematic_cost") for o, v in (gap.get("per_output") or {}).items()}
 
 
+def effect_gap_closed(before: float | None, after: float | None,
+                      ceiling: float | None) -> float | None:
+    """Share of the gap between the nominal and the true plant removed, on one output.
+
+    ``[(1 - f_before)^2 - (1 - f_after)^2] / [(1 - f_before)^2 - (1 - f_true)^2]`` with the
+    validation fits as fractions and ``f_true`` the true plant's fit on the same noisy run (the
+    ``ceiling``): the measurement noise, which no model removes, is not part of this gap
+    (:func:`panto.identification.diagnosis.benchmark.gap_closed`'s definition). 1 means the
+    diagnosed model predicts as well as the plant itself; None where the fitted nominal is
+    already within 0.1 fit points of the plant (no gap to close) or a fit is missing.
+    """
+    if before is None or after is None or ceiling is None or ceiling - before < 0.1:
+        return None
+    gap = (1 - before / 100) ** 2 - (1 - ceiling / 100) ** 2
+    return ((1 - before / 100) ** 2 - (1 - after / 100) ** 2) / gap
+
+
 def score(record: dict) -> dict:
-    """Add ``outcome``, ``expected``, ``correct``, ``strong``, ``gap_closed_main`` and
+    """Add ``outcome``, ``expected``, ``correct``, ``strong``, ``gap_closed_main`` (share of
+    the validation residual energy removed, noise included), ``effect_gap_closed_main``
+    (:func:`effect_gap_closed`: share of the gap to the true plant removed) and
     ``nominal_left``: per output, the true plant's validation fit less the fitted nominal's
     (fit points the nominal really misses; near zero when it absorbs the effect)."""
     outcome = "error" if "error" in record else \
@@ -224,6 +243,9 @@ def score(record: dict) -> dict:
                   correct=outcome == EXPECTED[record["label"]],
                   strong=record.get("strongest", 0.0) >= STRONG, main_output=main,
                   gap_closed_main=closed,
+                  effect_gap_closed_main=effect_gap_closed(
+                      before.get(main), (record.get("fit_after") or {}).get(main),
+                      (record.get("ceiling") or {}).get(main)),
                   unabsorbable=max((record.get("unabsorbed") or {"": -math.inf}).values())
                   >= STRONG)
     return record
@@ -250,8 +272,8 @@ def summarise(records: list[dict]) -> dict:
     clean = [r for r in records if r["label"] == "clean"]
     named = [r for r in library if r["correct"] and r["gap_closed_main"] is not None]
 
-    def median_gap(group: list[dict]) -> float | None:
-        values = [r["gap_closed_main"] for r in group if r["gap_closed_main"] is not None]
+    def median_gap(group: list[dict], key: str = "gap_closed_main") -> float | None:
+        values = [r[key] for r in group if r.get(key) is not None]
         return float(np.median(values)) if values else None
 
     summary = {
@@ -273,6 +295,12 @@ def summarise(records: list[dict]) -> dict:
         "gap_closed_median_named_all": median_gap(named),
         "gap_closed_median_named_strong_reproducible": median_gap(
             [r for r in named if r["strong"] and r.get("reproducible", True)]),
+        "effect_gap_closed_median_named_strong": median_gap(
+            [r for r in named if r["strong"]], "effect_gap_closed_main"),
+        "effect_gap_closed_median_named_all": median_gap(named, "effect_gap_closed_main"),
+        "effect_gap_closed_median_named_strong_reproducible": median_gap(
+            [r for r in named if r["strong"] and r.get("reproducible", True)],
+            "effect_gap_closed_main"),
         "errors": sum(1 for r in records if r["outcome"] == "error"),
         "per_label": {label: {"all": _share([r for r in records if r["label"] == label]),
                               "strong": _share([r for r in records if r["label"] == label
@@ -337,7 +365,17 @@ def markdown(report: dict) -> str:
              f"{_percent(s['gap_closed_median_named_strong'])} | | "
              f"{_percent(s['gap_closed_median_named_all'])} |",
              f"| median gap closed where named right, free run reproducible (filtered) | "
-             f"{_percent(s.get('gap_closed_median_named_strong_reproducible'))} | | |", "",
+             f"{_percent(s.get('gap_closed_median_named_strong_reproducible'))} | | |",
+             f"| median share of the gap to the true plant closed where named right (noise "
+             f"not counted as gap) | {_percent(s.get('effect_gap_closed_median_named_strong'))} "
+             f"| | {_percent(s.get('effect_gap_closed_median_named_all'))} |",
+             f"| the same, free run reproducible (filtered) | "
+             f"{_percent(s.get('effect_gap_closed_median_named_strong_reproducible'))} | | |",
+             "", "*Gap closed*: the share of the validation residual energy removed on the "
+             "output the effect costs most, measurement noise included (the noise no model "
+             "removes, so a weak effect caps it far below 100 %); *gap to the true plant*: the "
+             "share of the energy between the fitted nominal and the true plant removed "
+             "(`effect_gap_closed`).", "",
              f"Errors: {s['errors']}.", "", "## Per label", "",
              "| label | expected | right (strong) | right (all) |", "|---|---|---|---|"]
     lines += [f"| {label} | `{EXPECTED[label]}` | {_cell(v['strong'])} | {_cell(v['all'])} |"
@@ -352,8 +390,8 @@ def markdown(report: dict) -> str:
     lines += ["", "## Every case", "",
               "| case | excitation | Hz | s | inputs | outputs | SNR dB | strength | "
               "detectability | unabsorbed | nominal misses | outcome | right | gap closed | "
-              "wall s |",
-              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+              "gap to the true plant closed | wall s |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in report["cases"]:
         detect = ", ".join(f"{k} {v:.1f}" for k, v in (r.get("detectability") or {}).items())
         left = ", ".join(f"{k} {v:.1f}" for k, v in (r.get("nominal_left") or {}).items())
@@ -365,7 +403,7 @@ def markdown(report: dict) -> str:
                      f"{r['strength']:.2f} | {detect} | {kept or '-'} | {left or '-'} | "
                      f"{outcome} | "
                      f"{'yes' if r['correct'] else 'no'} | {_percent(r['gap_closed_main'])} | "
-                     f"{r['wall_s']:.0f} |")
+                     f"{_percent(r.get('effect_gap_closed_main'))} | {r['wall_s']:.0f} |")
     return "\n".join(lines) + "\n"
 
 
@@ -394,6 +432,24 @@ def write_report(out: Path, records: list[dict], settings: dict, complete: bool)
     out.with_suffix(".md").write_text(markdown(report))
 
 
+def rescore(path: Path, quiet: bool = False) -> int:
+    """Score the stored report ``path`` (``.json``) again and rewrite its ``.json`` and ``.md``.
+
+    Only the scores are recomputed from each case's recorded outcome, fits and truth; the runs,
+    their settings and the command that produced them are kept. 2 when the file cannot be read.
+    """
+    try:
+        report = json.loads(path.read_text())
+        records = [score(dict(r)) for r in report["cases"]]
+        settings = report["settings"]
+    except (OSError, ValueError, KeyError, TypeError) as error:
+        print(f"error: cannot rescore {path}: {error}", file=sys.stderr)
+        return 2
+    write_report(path.with_suffix(""), records, settings, report.get("complete", True))
+    say(f"rescored {path} ({len(records)} cases)", quiet)
+    return 0
+
+
 # --- command line -----------------------------------------------------------------------------
 
 def parse_arguments(argv: list[str] | None) -> argparse.Namespace:
@@ -412,7 +468,12 @@ def parse_arguments(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--options", nargs="*", default=[], metavar="KEY=VALUE",
                         help="DiagnosisOptions fields, e.g. adequacy=true global_fit=true")
     parser.add_argument("--quiet", action="store_true")
+    parser.add_argument("--rescore", default=None, metavar="REPORT.json",
+                        help="score a stored report again with this version's scores (no case "
+                             "is run; every recorded outcome and fit is kept) and rewrite it")
     arguments = parser.parse_args(argv)
+    if arguments.rescore:
+        return arguments
     if arguments.split == "heldout" and not arguments.i_am_not_tuning:
         parser.error("--split heldout is the held-out split: it runs only with --i-am-not-tuning "
                      "(tune on --split tune)")
@@ -430,6 +491,8 @@ def parse_arguments(argv: list[str] | None) -> argparse.Namespace:
 def main(argv: list[str] | None = None) -> int:
     """Run the benchmark (module notes); 0 when every case ran, 1 when some failed."""
     arguments = parse_arguments(argv)
+    if arguments.rescore:
+        return rescore(Path(arguments.rescore), arguments.quiet)
     count = arguments.cases or (6 if arguments.quick else 30)
     sequence = case_sequence(arguments.split, quick=arguments.quick)
     for _ in range(arguments.skip):

@@ -237,3 +237,49 @@ def test_the_reproducible_gap_median_leaves_out_only_the_unreproducible_runs(har
     summary = harness.summarise([case(0.9, True), case(0.8, True), case(0.02, False)])
     assert summary["gap_closed_median_named_strong"] == pytest.approx(0.8)
     assert summary["gap_closed_median_named_strong_reproducible"] == pytest.approx(0.85)
+
+
+def test_the_gap_to_the_true_plant_leaves_the_measurement_noise_out(harness):
+    # A nominal residual of white noise (energy n^2) plus an effect's error (energy e^2), fits in
+    # per cent of the output's spread: the true plant leaves only the noise.
+    rng = np.random.default_rng(3)
+    output = np.sin(np.linspace(0.0, 40.0, 4000))
+    noise, error = 0.05 * rng.standard_normal(4000), 0.04 * np.cos(np.linspace(0.0, 90.0, 4000))
+
+    def fit(residual):
+        return 100.0 * (1.0 - np.linalg.norm(residual) / np.linalg.norm(output - output.mean()))
+
+    before, truth = fit(noise + error), fit(noise)
+    half_fixed = fit(noise + 0.5 * error)
+    assert harness.effect_gap_closed(before, truth, truth) == pytest.approx(1.0)
+    assert harness.effect_gap_closed(before, before, truth) == pytest.approx(0.0)
+    # Halving the error's amplitude removes 3/4 of its energy (noise and error uncorrelated).
+    assert harness.effect_gap_closed(before, half_fixed, truth) == pytest.approx(0.75, abs=0.03)
+    # The energy measure counts the noise as gap: a perfect model removes only the error's share.
+    energy = 1.0 - ((100.0 - truth) / (100.0 - before)) ** 2
+    assert energy == pytest.approx(0.04 ** 2 / 2 / (0.04 ** 2 / 2 + 0.05 ** 2), abs=0.03)
+    assert harness.effect_gap_closed(before, truth, before + 0.05) is None  # no gap to close
+
+
+def test_rescoring_a_stored_report_keeps_every_outcome(harness, tmp_path):
+    records = [harness.score({"name": f"two-mass/dead_zone/{i}", "label": "dead_zone",
+                              "strongest": 5.0, "detectability": {"F_c": 5.0},
+                              "verdict": "effect" if i else "none",
+                              "effects": ["dead_zone"] if i else [],
+                              "gap_closed": {"F_c": 0.5}, "fit_before": {"F_c": 90.0},
+                              "fit_after": {"F_c": 94.0}, "ceiling": {"F_c": 95.0},
+                              "excitation": "aprbs", "rate": 50.0, "duration": 20.0,
+                              "inputs": 1, "outputs": ["F_c"], "snr_db": 30.0,
+                              "strength": 0.5, "wall_s": 1.0}) for i in range(2)]
+    settings = {"split": "tune", "command": "x", "options": {}, "workers": 1, "wall_s": 1.0,
+                "platform": "p", "cases": [r["name"] for r in records]}
+    harness.write_report(tmp_path / "report", records, settings, complete=True)
+    assert harness.main(["--rescore", str(tmp_path / "report.json"), "--quiet"]) == 0
+    import json
+    again = json.loads((tmp_path / "report.json").read_text())
+    assert [c["outcome"] for c in again["cases"]] == ["none", "dead_zone"]
+    assert again["summary"]["library_top1_all"]["right"] == 1
+    # (0.1^2 - 0.06^2) / (0.1^2 - 0.05^2) of the gap to the plant closed by the named case
+    assert again["cases"][1]["effect_gap_closed_main"] == pytest.approx(0.0064 / 0.0075)
+    (tmp_path / "broken.json").write_text("{")
+    assert harness.main(["--rescore", str(tmp_path / "broken.json"), "--quiet"]) == 2
