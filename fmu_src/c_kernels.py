@@ -7,7 +7,8 @@ C99 compiled with the system compiler (``$CC``, ``cc`` or ``gcc``) into
 the first time they are needed, built in a temporary file and moved into place so that parallel
 workers never load half a file; where the cache cannot be written, into a private temporary
 folder. Without a compiler :func:`build_library` gives None and the callers keep their Python
-path.
+path. A :class:`Kernel` names one kernel's library, source, flags, environment switch and
+ctypes typing, so that each calling module keeps only its cached ``load_kernel``-style function.
 """
 from __future__ import annotations
 
@@ -17,8 +18,9 @@ import os
 import shutil
 import subprocess
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import Any, Callable
 
 #: Environment variable naming the kernel cache folder (default ``~/.cache/panto/kernels``).
 CACHE_VARIABLE = "PANTO_KERNEL_CACHE"
@@ -79,5 +81,52 @@ def build_library(source: str, name: str, flags: tuple[str, ...] = ("-O2",),
         return None
 
 
+def _untyped(library: ctypes.CDLL) -> ctypes.CDLL:
+    return library
+
+
+@dataclass(frozen=True)
+class Kernel:
+    """One compiled kernel: its library's name, environment switch, flags, C source and typing.
+
+    The caller caches :meth:`load` once per process (``functools.lru_cache`` on a module
+    function, which tests clear) and checks :meth:`enabled` before using it.
+    """
+
+    name: str
+    """Stem of the shared library (``<name>.so`` in the source's cache folder)."""
+    variable: str
+    """Environment variable whose ``0`` (``false``/``no``/``off``) switches the kernel off."""
+    flags: tuple[str, ...] = ("-O2",)
+    """Compiler flags (``-fPIC -shared`` and ``-lm`` are added)."""
+    source: str | Path = ""
+    """The C source, or the file holding it (read at each :meth:`load`)."""
+    bind: Callable[[ctypes.CDLL], Any] = _untyped
+    """Types the entry points of a loaded library and gives what :meth:`load` returns."""
+    find: Callable[[], str | None] = find_compiler
+    """Names the compiler (None: none); a lambda looks a patched finder up at call time."""
+
+    def enabled(self) -> bool:
+        """False when the environment switch :attr:`variable` is ``0`` (see :func:`switched_on`)."""
+        return switched_on(self.variable)
+
+    def load(self, source: str | None = None,
+             bind: Callable[[ctypes.CDLL], Any] | None = None) -> Any | None:
+        """The library built from `source` (default :attr:`source`) and typed by `bind` (default
+        :attr:`bind`), or None where the source cannot be read, the library cannot be built or
+        loaded, or it lacks an entry point (not our library). Not cached."""
+        try:
+            if source is None:
+                source = self.source if isinstance(self.source, str) else \
+                    self.source.read_text(encoding="utf-8")
+        except OSError:
+            return None
+        library = build_library(source, self.name, self.flags, find=self.find)
+        try:
+            return None if library is None else (bind or self.bind)(library)
+        except AttributeError:  # not our library
+            return None
+
+
 __all__ = ["CACHE_VARIABLE", "switched_on", "find_compiler", "cache_folder", "build",
-           "build_library"]
+           "build_library", "Kernel"]

@@ -71,27 +71,21 @@ def _bind(library: ctypes.CDLL) -> Kernel:
     return Kernel(switched, propagate)
 
 
+#: How the kernel is built, typed and switched (:class:`panto.fmu_src.c_kernels.Kernel`).
+BUILD = c_kernels.Kernel("contact_kernel", SWITCH_VARIABLE, COMPILER_FLAGS, SOURCE, _bind,
+                         find=lambda: c_kernels.find_compiler())
+
+
 @functools.lru_cache(maxsize=1)
 def load_kernel() -> Kernel | None:
     """The compiled kernel (built on the first call into the kernel cache, else into a private
     temporary folder), or None where it cannot be built or loaded."""
-    try:
-        source = SOURCE.read_text(encoding="utf-8")
-    except OSError:
-        return None
-    library = c_kernels.build_library(source, "contact_kernel", COMPILER_FLAGS,
-                                      find=lambda: c_kernels.find_compiler())
-    try:
-        return None if library is None else _bind(library)
-    except AttributeError:  # not our library
-        return None
+    return BUILD.load()
 
 
 def _use_kernel() -> Kernel | None:
     """The kernel when it is switched on and available, else None."""
-    if not (USE_COMPILED and c_kernels.switched_on(SWITCH_VARIABLE)):
-        return None
-    return load_kernel()
+    return load_kernel() if USE_COMPILED and BUILD.enabled() else None
 
 
 def active_backend() -> str:
@@ -199,4 +193,4 @@ def run_switched(modes: list, states: np.ndarray, u: np.ndarray, slope: np.ndarr
 
 
 __all__ = ["run_switched", "propagate", "Kernel", "active_backend", "load_kernel", "USE_COMPILED",
-           "SWITCH_VARIABLE", "SOURCE", "COMPILER_FLAGS", "TABLES"]
+           "SWITCH_VARIABLE", "SOURCE", "COMPILER_FLAGS", "TABLES", "BUILD"]

@@ -49,19 +49,16 @@ def _bind(library: ctypes.CDLL) -> ctypes._CFuncPtr:
     return function
 
 
+#: How the kernel is built, typed and switched (:class:`panto.fmu_src.c_kernels.Kernel`).
+BUILD = c_kernels.Kernel("stick_slip", SWITCH_VARIABLE, COMPILER_FLAGS, SOURCE, _bind,
+                         find=lambda: _compiler())
+
+
 @functools.lru_cache(maxsize=1)
 def load_kernel() -> ctypes._CFuncPtr | None:
     """The compiled kernel (built on the first call into the kernel cache, else into a private
     temporary folder), or None where it cannot be built or loaded."""
-    try:
-        source = SOURCE.read_text(encoding="utf-8")
-    except OSError:
-        return None
-    library = c_kernels.build_library(source, "stick_slip", COMPILER_FLAGS, find=lambda: _compiler())
-    try:
-        return None if library is None else _bind(library)
-    except AttributeError:  # not our library
-        return None
+    return BUILD.load()
 
 
 def active_backend() -> str:
@@ -71,9 +68,7 @@ def active_backend() -> str:
 
 def _use_kernel() -> ctypes._CFuncPtr | None:
     """The kernel when it is switched on and available, else None."""
-    if not (USE_COMPILED and c_kernels.switched_on(SWITCH_VARIABLE)):
-        return None
-    return load_kernel()
+    return load_kernel() if USE_COMPILED and BUILD.enabled() else None
 
 
 def run_stick_slip(phi: np.ndarray, drive: np.ndarray, x_start: np.ndarray, column: np.ndarray,
@@ -133,4 +128,4 @@ def _step_numpy(states: np.ndarray, phi: np.ndarray, column: np.ndarray, joint: 
 
 
 __all__ = ["run_stick_slip", "active_backend", "load_kernel", "USE_COMPILED", "SWITCH_VARIABLE",
-           "SOURCE", "COMPILER_FLAGS"]
+           "SOURCE", "COMPILER_FLAGS", "BUILD"]

@@ -188,24 +188,15 @@ MAX_MASSES = 3
 
 def enabled() -> bool:
     """False when ``$PANTO_FRICTION_KERNEL`` is ``0`` (or ``false``/``no``/``off``)."""
-    return c_kernels.switched_on(SWITCH_VARIABLE)
+    return BUILD.enabled()
 
 
 def _compiler() -> str | None:
     return c_kernels.find_compiler()
 
 
-@lru_cache(maxsize=1)
-def load_library() -> ctypes.CDLL | None:
-    """The compiled kernel (built into the cache on first use: :mod:`panto.fmu_src.c_kernels`),
-    or None if it cannot be built.
-
-    ``-ffp-contract=off``: no fused multiply-adds, so the products round as NumPy's do.
-    """
-    library = c_kernels.build_library(C_SOURCE, "friction_run", ("-O2", "-ffp-contract=off"),
-                                      find=lambda: _compiler())
-    if library is None:
-        return None
+def _declare(library: ctypes.CDLL) -> ctypes.CDLL:
+    """`library` with the argument and result types of ``friction_run`` and ``nonlinear_run``."""
     library.friction_run.restype = None
     library.friction_run.argtypes = [ctypes.c_int, ctypes.c_long, ctypes.c_int] + [_POINTER] * 5 \
         + [ctypes.c_double, _POINTER]
@@ -213,6 +204,19 @@ def load_library() -> ctypes.CDLL | None:
     library.nonlinear_run.argtypes = [ctypes.c_int, ctypes.c_long, ctypes.c_int] + [_POINTER] * 4 \
         + [ctypes.c_double] + [_POINTER] * 4
     return library
+
+
+#: How the kernel is built, typed and switched (:class:`panto.fmu_src.c_kernels.Kernel`; no fused
+#: multiply-adds, so the products round as NumPy's do).
+BUILD = c_kernels.Kernel("friction_run", SWITCH_VARIABLE, ("-O2", "-ffp-contract=off"), C_SOURCE,
+                         _declare, find=lambda: _compiler())
+
+
+@lru_cache(maxsize=1)
+def load_library() -> ctypes.CDLL | None:
+    """The compiled kernel (built into the cache on first use: :mod:`panto.fmu_src.c_kernels`),
+    or None if it cannot be built."""
+    return BUILD.load()
 
 
 def available() -> bool:
@@ -331,4 +335,4 @@ def run(phi: np.ndarray, drive: np.ndarray, x: np.ndarray, substeps: int, half: 
 
 
 __all__ = ["run", "friction_run", "nonlinear_run", "friction_loop", "load_library", "available", "enabled", "C_SOURCE", "SWITCH_VARIABLE",
-           "CACHE_VARIABLE", "MAX_MASSES"]
+           "CACHE_VARIABLE", "MAX_MASSES", "BUILD"]

@@ -34,6 +34,9 @@ from panto.fmu_src import c_kernels
 COMPILER_FLAGS = ("-std=c99", "-O2", "-ffp-contract=off", "-fno-builtin")
 #: Environment variable: ``0`` switches the compiled balance off (the Python functions run).
 SWITCH_VARIABLE = "PANTO_STATIC_KERNEL"
+#: How the library is built and switched (:class:`panto.fmu_src.c_kernels.Kernel`; the source is
+#: generated per call of :func:`load`).
+BUILD = c_kernels.Kernel("static_balance", SWITCH_VARIABLE, COMPILER_FLAGS)
 #: libm functions the translation accepts (CPython's ``math`` calls the same ones).
 FUNCTIONS = {"sin", "cos", "tan", "atan2", "sqrt", "exp", "log", "atan", "asin", "acos",
              "sinh", "cosh", "tanh"}
@@ -300,17 +303,13 @@ def load(functions: dict[str, Callable], sizes: Sequence[int]) -> StaticKernel |
         source = kernel_source(functions, sizes)
     except (Untranslatable, OSError, TypeError, SyntaxError):
         return None
-    library = c_kernels.build_library(source, "static_balance", COMPILER_FLAGS)
-    try:
-        return None if library is None else StaticKernel(library, sizes)
-    except AttributeError:  # not our library
-        return None
+    return BUILD.load(source, lambda library: StaticKernel(library, sizes))
 
 
 def switched_on() -> bool:
     """False when ``PANTO_STATIC_KERNEL=0`` (:data:`SWITCH_VARIABLE`): the Python functions run."""
-    return c_kernels.switched_on(SWITCH_VARIABLE)
+    return BUILD.enabled()
 
 
 __all__ = ["COMPILER_FLAGS", "SWITCH_VARIABLE", "FUNCTIONS", "Untranslatable", "python_to_c",
-           "kernel_source", "StaticKernel", "load", "switched_on"]
+           "kernel_source", "StaticKernel", "load", "switched_on", "BUILD"]
