@@ -129,3 +129,32 @@ def test_lasso_bic_solver_ranks_the_cubic_term_first():
                           options=DiscoveryOptions(solver="lasso-bic", candidates=1))
     assert hypothesis is not None and hypothesis.families[0] == "cube"
     assert hypothesis.ranking[0][1] == "y^3 - y"
+
+
+def test_a_refitted_kink_level_finds_a_sensor_zero_between_the_quantiles():
+    # A sensor reads r + |y - r| (reflected below r): the kink term |y - c| - y with theta = 1
+    # and c = r reproduces it exactly with the nominal unchanged. r lies between the library's
+    # quantiles; with the level chosen on a grid the refit lands on r and closes the gap to the
+    # noise.
+    mean = (1.0, 1.0)
+    reference = 0.37  # between quantiles of y on this run
+    effect = lambda y: reference + np.abs(y - reference)  # noqa: E731
+    train, validation = _run(1, effect, mean), _run(2, effect, mean)
+    nominal = dict(TRUTH)  # the sensor is the only discrepancy
+    fixed = DiscoveryOptions(families=("abs",), delays=(), derivatives=False, products=False,
+                             kink_quantiles=(0.1, 0.25, 0.5), candidates=3)
+    free = DiscoveryOptions(**{**{f: getattr(fixed, f) for f in
+                                  ("families", "delays", "derivatives", "products",
+                                   "kink_quantiles", "candidates")}, "level_grid": 200})
+    y = PLANT.simulate(nominal, train)[:, 0]
+    assert min(abs(np.quantile(y, q) - reference) for q in fixed.kink_quantiles) > 0.05
+    at_quantiles = discover(PLANT, nominal, FREE, train, validation, options=fixed)
+    refitted = discover(PLANT, nominal, FREE, train, validation, options=free)
+    assert refitted is not None and refitted.families == ("abs",)
+    level = float(refitted.term.split("|y - ")[1].split("|")[0])  # the formula's kink
+    assert level == pytest.approx(reference, abs=0.03)
+    assert refitted.coefficients[0] == pytest.approx(1.0, abs=0.05)
+    truth_fit = fit_percent(validation.outputs[:, 0],
+                            effect(PLANT.simulate(TRUTH, validation)[:, 0]))
+    assert refitted.fit_validation_after > truth_fit - 0.5
+    assert at_quantiles is None or refitted.gain > at_quantiles.gain

@@ -107,6 +107,12 @@ class DiscoveryOptions:
     admit : callable, optional
         ``admit(term, output) -> bool``: whether `term` may be added to `output` (None: every
         term of the library).
+    level_grid : int
+        0: a kink ``|s - c|`` stays at the quantile it was ranked at. Else its level ``c`` is
+        first chosen on a grid of this many levels across the signal's range on the training
+        run (:func:`profile_level`: the least-squares fit of the residual by the term and a
+        constant at each level, the nominal held), then refitted as any term: a sensor's zero
+        lies anywhere, not on a quantile.
     """
 
     delays: tuple[int, ...] = (2, 5, 10)
@@ -126,12 +132,15 @@ class DiscoveryOptions:
     families: tuple[str, ...] = FAMILIES
     derivatives: bool = True
     admit: Callable[[Term, str], bool] | None = None
+    level_grid: int = 0
 
     def __post_init__(self) -> None:
         problems = [f"solver {self.solver!r} is not 'omp' or 'lasso-bic'"
                     ] if self.solver not in ("omp", "lasso-bic") else []
         if any(int(d) < 1 for d in self.delays) or self.max_terms < 1 or self.candidates < 1:
             problems.append("delays, max_terms and candidates must be >= 1")
+        if self.level_grid < 0:
+            problems.append(f"level_grid must be >= 0 (got {self.level_grid})")
         if not all(0.0 < q < 1.0 for q in (self.smoothing, *self.kink_quantiles)) or not all(
                 w > 0.0 for w in (self.sign_width, *self.play_radii, *self.memory_time_constants)):
             problems.append("smoothing and kink_quantiles must lie in (0, 1), the widths must be "
@@ -458,6 +467,37 @@ class Hypothesis:
                 for f in fields(self) for v in [getattr(self, f.name)]}
 
 
+def profile_level(term: Term, data: IdentificationData, simulated: np.ndarray,
+                  output_names: Sequence[str], residual: np.ndarray, levels: int) -> Term:
+    """The kink `term` (``|s - c| ...``) at the level ``c`` of a grid of `levels` levels across
+    its signal's range (or its own level) that best fits `residual` by least squares with a
+    constant. A kink of the output's own simulation (:attr:`Term.deviation`) is then zero where
+    the output lies above ``c``, ``|y - c| - y + c = 2 max(c - y, 0)`` (reference ``-c``): with
+    ``theta = 1`` the model reads ``c + |y - c|`` (a sensor blind to the sign about ``c``), with
+    ``1/2`` it clips at ``c``, the nominal's own level untouched; another kink is re-centred on
+    its mean (:attr:`Term.reference`)."""
+    s = term.signals[0].values(data, simulated, output_names)
+    keep = np.isfinite(residual) & np.isfinite(s)
+    target = residual[keep] - np.mean(residual[keep])
+
+    def misfit(level: float) -> float:
+        phi = term_at(level).evaluate(data, simulated, output_names)[keep]
+        phi = phi - np.mean(phi)
+        power = float(phi @ phi)
+        return float(target @ target) - (float(phi @ target) ** 2 / power if power > 0 else 0.0)
+
+    def term_at(level: float) -> Term:
+        return replace(term, width=float(level), reference=0.0)
+
+    lo, hi = float(np.min(s[keep])), float(np.max(s[keep]))
+    grid = [c for c in np.linspace(lo, hi, levels + 2)[1:-1] if _crosses(s[keep], c)]
+    chosen = term_at(min(grid + [term.width], key=misfit))
+    if chosen.deviation:
+        return replace(chosen, reference=-chosen.width)
+    return replace(chosen, reference=float(np.mean(chosen.evaluate(data, simulated,
+                                                                   output_names))))
+
+
 def with_term(structure: ModelStructure, terms: Sequence[Term], output: str,
               coefficients: Sequence[float]) -> TermStructure:
     """The nominal with `terms` added to `output` (:class:`TermStructure`)."""
@@ -596,10 +636,16 @@ class _Refit:
 
     def _run(self, output: str, terms: Sequence[Term], formula: str) -> Hypothesis:
         simulated = np.asarray(self.structure.simulate(dict(self.parameters), self.train), float)
-        phi = np.column_stack([t.evaluate(self.train, simulated, self.structure.output_names)
-                               for t in terms])
         residual = self.train.output(output) - simulated[:, list(self.structure.output_names)
                                                           .index(output)]
+        if self.options.level_grid:
+            profiled = [profile_level(t, self.train, simulated, self.structure.output_names,
+                                      residual, self.options.level_grid)
+                        if t.family == "abs" else t for t in terms]
+            terms = [t for k, t in enumerate(profiled) if t not in profiled[:k]]  # kinks met
+            formula = " + ".join(t.formula for t in terms)
+        phi = np.column_stack([t.evaluate(self.train, simulated, self.structure.output_names)
+                               for t in terms])
         keep = np.isfinite(residual)
         start = np.linalg.lstsq(phi[keep], residual[keep], rcond=None)[0]
         model = with_term(self.structure, terms, output, start)
@@ -624,5 +670,5 @@ class _Refit:
             message=result.message)
 
 
-__all__ = ["DiscoveryOptions", "Signal", "Term", "TermStructure", "Hypothesis",
+__all__ = ["DiscoveryOptions", "Signal", "Term", "TermStructure", "Hypothesis", "profile_level",
            "FAMILIES", "play", "low_pass", "term_library", "rank_terms", "with_term", "discover"]

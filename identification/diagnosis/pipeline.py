@@ -565,10 +565,10 @@ def challenger(term: Any, output: str) -> bool:
 
 
 #: The challenge's :class:`~panto.identification.diagnosis.discovery.DiscoveryOptions`: the
-#: :func:`challenger` terms, kinks at every twentieth quantile (a sensor's zero can lie anywhere
-#: in the signal's range).
+#: :func:`challenger` terms, kinks ranked at every twentieth quantile, their level then chosen on
+#: a grid of 200 across the signal's range (a sensor's zero can lie anywhere in it).
 CHALLENGE = {"families": CHALLENGERS, "delays": (), "derivatives": False, "admit": challenger,
-             "kink_quantiles": tuple(k / 20 for k in range(1, 20))}
+             "kink_quantiles": tuple(k / 20 for k in range(1, 20)), "level_grid": 200}
 
 
 def _converged(adequacy: Any, say: Progress) -> bool:
