@@ -4,9 +4,11 @@ This is the Python path for fitting scripts. It is compiled (``sympy.lambdify``)
 :class:`~panto.fmu_src.symbolic.MechanicalModel` as the C code of the FMUs, so the two paths share the
 equations but not the code that evaluates them.
 
-Compiling takes half a minute for the pantograph, so the compiled generated code is cached on
-disk (``$PANTO_NUMERIC_CACHE``, default ``~/.cache/panto/numeric``) under a hash of the model's
-expressions and of this code (:func:`cache_key`); later processes load it in milliseconds.
+Compiling takes seconds for the pantograph, so the generated source and its compiled code are
+cached on disk (``$PANTO_NUMERIC_CACHE``, default ``~/.cache/panto/numeric``) under a hash of the
+model's expressions and of this code (:func:`cache_key`); later processes load it in
+milliseconds (:func:`cached_functions`, also used with :func:`source_cache_key`, a key read from
+the model sources without deriving the model, for the pantograph at rest).
 """
 from __future__ import annotations
 
@@ -14,6 +16,7 @@ import builtins
 import hashlib
 import inspect
 import importlib.util
+import linecache
 import marshal
 import sys
 from dataclasses import dataclass
@@ -25,7 +28,7 @@ import sympy as sp
 from scipy import linalg, optimize
 
 from panto.fmu_src.symbolic import (MechanicalModel, default_cache_dir, prune, read_verified,
-                                    write_atomic)
+                                    source_digest, write_atomic)
 
 
 class ModelEvaluationError(ValueError):
@@ -107,8 +110,8 @@ def _cse_nested(expression):
 
 # --- cache of the compiled functions ----------------------------------------------------------
 
-#: Bumped when the layout of a cache file changes.
-_CACHE_FORMAT = 1
+#: Bumped when the layout of a cache file changes (2: the generated source kept beside its code).
+_CACHE_FORMAT = 2
 
 
 def _digest_expression(expression, memo: dict) -> bytes:
@@ -176,34 +179,46 @@ def _namespace() -> dict:
 
 
 def _code_objects(functions, filename: str):
-    """Compiled generated source of each function (same nesting as ``functions``)."""
+    """The generated source and its compiled code for each function (same nesting as
+    ``functions``; a tuple is kept as a constant). Every function is compiled under its own
+    ``filename`` (``<file:name[i]>``), so that :func:`inspect.getsource` finds it again."""
     if functions is None:
         return None
     if isinstance(functions, list):
-        return [_code_objects(f, filename) for f in functions]
+        return [_code_objects(f, f"{filename}[{i}]") for i, f in enumerate(functions)]
+    if isinstance(functions, tuple):
+        return {"value": functions}
     names = set(functions.__code__.co_names)
     if not names <= set(_namespace()) | set(dir(builtins)):
         raise ValueError(f"generated code uses names outside the math namespace: {sorted(names)}")
-    return compile(inspect.getsource(functions), filename, "exec")
+    source = inspect.getsource(functions)
+    return {"source": source, "code": compile(source, filename, "exec")}
 
 
 def _functions_from_code(code):
-    """Functions from the compiled generated sources (inverse of :func:`_code_objects`)."""
+    """Functions from the stored sources (inverse of :func:`_code_objects`); each source is
+    registered with :mod:`linecache` under its code's file name, as ``lambdify`` does, so
+    :func:`inspect.getsource` reads it (the C translation of the static functions does)."""
     if code is None:
         return None
     if isinstance(code, list):
         return [_functions_from_code(c) for c in code]
+    if "value" in code:
+        return code["value"]
+    source, compiled = code["source"], code["code"]
+    linecache.cache[compiled.co_filename] = (len(source), None, source.splitlines(True),
+                                             compiled.co_filename)
     namespace = dict(_namespace())
-    exec(code, namespace)  # noqa: S102 - our own generated code, checked by its digest
+    exec(compiled, namespace)  # noqa: S102 - our own generated code, checked by its digest
     return namespace["_lambdifygenerated"]
 
 
 def read_cached_functions(path: Path, key: str) -> dict | None:
     """The compiled functions stored in ``path``, or None if missing, stale or corrupted.
 
-    The file is the SHA-256 of its payload followed by the payload (``marshal`` of the key and
-    the code objects of the generated source); a file whose digest or key does not match is
-    never unmarshalled or executed.
+    The file is the SHA-256 of its payload followed by the payload (``marshal`` of the key and,
+    per function, its generated source and compiled code); a file whose digest or key does not
+    match is never unmarshalled or executed.
     """
     payload = read_verified(path)
     if payload is None:
@@ -218,15 +233,42 @@ def read_cached_functions(path: Path, key: str) -> dict | None:
 
 
 def write_cached_functions(path: Path, key: str, functions: dict) -> bool:
-    """Store the compiled generated source atomically (temporary file + rename).
+    """Store the generated sources and their compiled code atomically (temporary file + rename).
 
     Returns False (and leaves no file) if the cache folder is not writable.
     """
     try:
-        code = {name: _code_objects(f, str(path)) for name, f in functions.items()}
+        code = {name: _code_objects(f, f"<{path.name}:{name}>") for name, f in functions.items()}
     except (OSError, ValueError, TypeError):  # source not retrievable or foreign names
         return False
     return write_atomic(path, marshal.dumps({"key": key, "functions": code}))
+
+
+def cached_functions(folder: Path, stem: str, key: str, build) -> tuple[dict, str]:
+    """The functions stored as ``folder/<stem>-<key>.bin``, else ``build()``'s, then stored
+    (older files of the stem pruned; an unwritable folder or a corrupted file is passed over).
+
+    Returns the functions and where they came from: ``"cache"`` or ``"compiled"``.
+    """
+    path = folder / f"{stem}-{key}.bin"
+    functions = read_cached_functions(path, key)
+    if functions is not None:
+        return functions, "cache"
+    functions = build()
+    if write_cached_functions(path, key, functions):
+        prune(folder, f"{stem}-*.bin")
+    return functions, "compiled"
+
+
+def source_cache_key(*files: Path) -> str:
+    """Key of functions generated from the model sources by the code in `files`: a hash of
+    every ``fmu_src/*.py`` with SymPy's and Python's versions
+    (:func:`~panto.fmu_src.symbolic.source_digest`), of the code that compiles and caches
+    functions (this module) and of `files`, without deriving the model (which costs seconds)."""
+    digest = hashlib.sha256(_code_digest() + source_digest().encode())
+    for file in files:
+        digest.update(Path(file).name.encode() + b"\0" + Path(file).read_bytes())
+    return digest.hexdigest()[:24]
 
 
 class NumericModel:
@@ -271,16 +313,8 @@ class NumericModel:
             self.source = "compiled"
             return self._compile_all()
         folder = default_cache_dir() if self.cache_dir is None else Path(self.cache_dir)
-        key = cache_key(self.model)
-        path = folder / f"{self.model.name}-{key}.bin"
-        functions = read_cached_functions(path, key)
-        if functions is not None:
-            self.source = "cache"
-            return functions
-        functions = self._compile_all()
-        if write_cached_functions(path, key, functions):
-            prune(folder, f"{self.model.name}-*.bin")
-        self.source = "compiled"
+        functions, self.source = cached_functions(folder, self.model.name, cache_key(self.model),
+                                                  self._compile_all)
         return functions
 
     def _compile_all(self) -> dict:

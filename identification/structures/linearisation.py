@@ -6,7 +6,8 @@ candidate parameter set (section 4.1.3): static equilibrium by Newton's method, 
 
 The functions of the model at rest are compiled here from the symbolic model with the velocities
 set to zero *before* differentiating (``dr/dq`` at ``v = 0`` has about 1 500 operations instead of
-350 000), once per process (a few seconds); their generated Python is translated into C
+350 000), once (over a second; their generated source is cached on disk by a hash of the model
+sources, so later processes load it in milliseconds); their generated Python is translated into C
 (:mod:`~panto.identification.structures.static_kernel`: the same operations, bit for bit the same
 results, 3 us instead of 55 us per balance), the Python kept as fallback. Small linear algebra
 uses numpy, and the matrix exponential is computed here, because scipy's threaded BLAS makes
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 import math
 from functools import lru_cache
+from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
@@ -27,14 +29,44 @@ from panto.identification.structures import static_kernel
 
 @lru_cache(maxsize=1)
 def static_functions() -> dict[str, Callable]:
-    """Compiled functions of the pantograph at rest (``v = 0``), built once per process.
+    """Compiled functions of the pantograph at rest (``v = 0``), loaded once per process
+    (:func:`load_static_functions` from the default cache folder).
 
-    Returns ``deps(p, q) -> [phi2, phi3]``, ``reach(p, q) -> discriminant`` (>= 0 where the
-    linkage closes), ``height(p, q, deps) -> y_cb``, ``balance(p, q, u, deps) -> (r, dr/dq)`` and
-    ``linear(p, q, u, deps) -> (M, dr/dv, dr/du, h, dh/dq, dh/dv, dh/du)``, all at ``v = 0``,
-    and ``static_parameters``: the indices into ``p`` of the parameters the equilibrium depends
-    on (those in ``r``, ``dr/dq``, the linkage and ``y_cb`` at rest; not the dampings).
+    Returns ``phi2(p, q)``, ``phi3(p, q, phi2)`` (the linkage angles), ``reach(p, q) ->
+    discriminant`` (>= 0 where the linkage closes), ``height(p, q, deps) -> y_cb``,
+    ``balance(p, q, u, deps) -> (r, dr/dq)`` and ``linear(p, q, u, deps) -> (M, dr/dv, dr/du,
+    h, dh/dq, dh/dv, dh/du)``, all at ``v = 0``, and ``static_parameters``: the indices into
+    ``p`` of the parameters the equilibrium depends on (those in ``r``, ``dr/dq``, the linkage
+    and ``y_cb`` at rest; not the dampings).
     """
+    return load_static_functions()[0]
+
+
+#: File-name stem of the static functions in the cache folder of the compiled models.
+CACHE_STEM = "PantographStatic"
+
+
+def load_static_functions(cache_dir: str | Path | None = None) -> tuple[dict[str, Callable], str]:
+    """The functions of :func:`static_functions` and where they came from (``"cache"`` or
+    ``"compiled"``).
+
+    Deriving them (the pantograph in SymPy, its Jacobians at rest, ``lambdify``) takes over a
+    second, so their generated source is stored in `cache_dir` (default
+    :func:`panto.fmu_src.symbolic.default_cache_dir`) under a hash of the model sources and of
+    this module (:func:`panto.fmu_src.numeric.source_cache_key`) and executed again by later
+    processes: the same source, so bit for bit the same results. A missing, stale or corrupted
+    file is derived again (and replaced where the folder is writable).
+    """
+    from panto.fmu_src import numeric
+    from panto.fmu_src.symbolic import default_cache_dir
+
+    folder = default_cache_dir() if cache_dir is None else Path(cache_dir)
+    return numeric.cached_functions(folder, CACHE_STEM, numeric.source_cache_key(Path(__file__)),
+                                    derive_static_functions)
+
+
+def derive_static_functions() -> dict[str, Callable]:
+    """The functions of :func:`static_functions`, derived and compiled in this process."""
     import sympy as sp
 
     from panto.fmu_src.pantograph import derive_pantograph

@@ -14,7 +14,8 @@ so the results are bit for bit those of the Python functions.
 
 Where the Python functions raise (the linkage cannot close, a math domain error, a division by
 zero) the C results are not finite or the reach test fails: the callers then run the Python
-functions, which raise as before. The library is built at first use by
+functions, which raise as before. The C source is kept on disk (:func:`kernel_source`); the
+library is built at first use by
 :mod:`panto.fmu_src.c_kernels` into the kernel cache (keyed by the hash of the generated source);
 without a compiler, or with ``PANTO_STATIC_KERNEL=0`` (:data:`SWITCH_VARIABLE`), the Python
 functions run.
@@ -23,12 +24,15 @@ from __future__ import annotations
 
 import ast
 import ctypes
+import hashlib
 import inspect
+import sys
+from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
 
-from panto.fmu_src import c_kernels
+from panto.fmu_src import c_kernels, symbolic
 
 #: Flags of the build: ISO C, no fused multiply-adds, libm calls kept as written.
 COMPILER_FLAGS = ("-std=c99", "-O2", "-ffp-contract=off", "-fno-builtin")
@@ -178,7 +182,8 @@ def python_to_c(source: str, name: str) -> tuple[str, int]:
     return head + " {\n" + "\n".join(emitter.lines) + "\n}\n", returned
 
 
-def kernel_source(functions: dict[str, Callable], sizes: Sequence[int]) -> str:
+def kernel_source(functions: dict[str, Callable], sizes: Sequence[int], *,
+                  cache_dir: str | Path | None | bool = None) -> str:
     """The C source of ``panto_static_balance``, ``_linear``, ``_height`` and ``_reach_grid``
     from the lambdified `functions` of
     :func:`~panto.identification.structures.linearisation.static_functions`.
@@ -188,11 +193,45 @@ def kernel_source(functions: dict[str, Callable], sizes: Sequence[int]) -> str:
     else 0 with the values of ``balance`` (``linear``, ``height``) at the linkage angles in
     ``out``; ``panto_static_reach_grid(in, phi1, n, out)`` writes ``reach`` at ``q`` with its
     first coordinate set to each of the `n` values ``phi1`` (2 where one is not finite).
+
+    The translation takes 0.1-0.2 s, so it is kept in `cache_dir` (default
+    :func:`panto.fmu_src.symbolic.default_cache_dir`; ``False``: neither read nor written) under
+    a hash of the functions' sources, `sizes`, this module and Python's version, checked by its
+    SHA-256; a missing or corrupted file is translated again.
     """
+    sources = {key: inspect.getsource(functions[key]) for key in _TRANSLATED}
+    if cache_dir is False:
+        return _translate(sources, sizes)
+    digest = hashlib.sha256(f"{sys.version} {tuple(int(s) for s in sizes)}".encode()
+                            + Path(__file__).read_bytes())
+    for key, text in sources.items():
+        digest.update(f"\0{key}\0{text}".encode())
+    folder = symbolic.default_cache_dir() if cache_dir is None else Path(cache_dir)
+    path = folder / f"{SOURCE_CACHE_STEM}-{digest.hexdigest()[:24]}.c"
+    stored = symbolic.read_verified(path)
+    try:
+        if stored is not None:
+            return stored.decode()
+    except UnicodeDecodeError:  # not a translation: made again
+        pass
+    source = _translate(sources, sizes)
+    if symbolic.write_atomic(path, source.encode()):
+        symbolic.prune(folder, f"{SOURCE_CACHE_STEM}-*.c")
+    return source
+
+
+#: The static functions translated, in the order of the C source.
+_TRANSLATED = ("reach", "phi2", "phi3", "balance", "linear", "height")
+#: File-name stem of the stored translations (:func:`kernel_source`).
+SOURCE_CACHE_STEM = "StaticKernel"
+
+
+def _translate(sources: dict[str, str], sizes: Sequence[int]) -> str:
+    """The C source of :func:`kernel_source` from the functions' generated `sources`."""
     parts = ["#include <math.h>\n"]
     outputs = {}
-    for key in ("reach", "phi2", "phi3", "balance", "linear", "height"):
-        text, outputs[key] = python_to_c(inspect.getsource(functions[key]), f"static_{key}")
+    for key in _TRANSLATED:
+        text, outputs[key] = python_to_c(sources[key], f"static_{key}")
         parts.append(text)
     n_p, n_q = sizes[0], sizes[1]
     for key, arguments in (("balance", "p, q, u"), ("linear", "p, q, u"), ("height", "p, q")):
@@ -311,5 +350,5 @@ def switched_on() -> bool:
     return BUILD.enabled()
 
 
-__all__ = ["COMPILER_FLAGS", "SWITCH_VARIABLE", "FUNCTIONS", "Untranslatable", "python_to_c",
-           "kernel_source", "StaticKernel", "load", "switched_on", "BUILD"]
+__all__ = ["COMPILER_FLAGS", "SWITCH_VARIABLE", "FUNCTIONS", "SOURCE_CACHE_STEM", "Untranslatable",
+           "python_to_c", "kernel_source", "StaticKernel", "load", "switched_on", "BUILD"]
