@@ -112,6 +112,10 @@ class Step:
     alternatives: tuple[str, ...] = ()
     """Other candidates the data support as well (:func:`_alternatives`): the withheld gain within
     the folds' standard error, the training ``dBIC`` within 10 (short of strong evidence)."""
+    evidence: str = ""
+    """Empty when the withheld run confirmed it sample by sample; else the evidence it passed on
+    instead (a contact loss on its force's distribution,
+    :mod:`~panto.identification.diagnosis.contact_statistics`)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -334,7 +338,7 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
         challenger = _challenge(nominal_model, train, validation, fit_before, fit_after,
                                 executor, progress, pool, options.max_evaluations) \
             if options.challenge and steps and gap["significant"] and \
-            remaining_gap["significant"] and _converged(
+            remaining_gap["significant"] and _comparable(steps, say) and _converged(
                 adequacy or adequacy_quietly(nominal, result, train), say) else None
     withdrawn = accepted if challenger is not None else []
     if challenger is not None:  # the accepted effects yield to an out-of-vocabulary term
@@ -346,6 +350,8 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
     where = where_summary(analysis_before, validation)
     summary = (_summary(verdict, accepted, fit_before, fit_after, where, remaining_gap, gap)
                if challenger is None else _yielded_summary(withdrawn, challenger, where)) + \
+        "".join(f"; {s.effect} passed on the {s.evidence} (the free run of a head that leaves "
+                "the wire is not reproducible sample by sample)" for s in steps if s.evidence) + \
         "".join(f"; the runs cannot tell {s.effect} from {' or '.join(s.alternatives)} (withheld "
                 "gains within the folds' standard error, training dBIC within 10: a run exciting "
                 "where they differ would tell)" for s in steps if s.alternatives) + \
@@ -571,6 +577,17 @@ CHALLENGE = {"families": CHALLENGERS, "delays": (), "derivatives": False, "admit
              "kink_quantiles": tuple(k / 20 for k in range(1, 20)), "level_grid": 200}
 
 
+def _comparable(steps: Sequence[Step], say: Progress) -> bool:
+    """Whether the accepted effects' withheld gains can be compared with a challenger's: not
+    when one passed on other evidence than the sample-by-sample fit (a flying head's contact
+    loss on its force's distribution)."""
+    other = [s.effect for s in steps if s.evidence]
+    if other:
+        say(f"diagnose: the accepted effects are not challenged: {', '.join(other)} passed on "
+            "the withheld run's statistics, which a term's fit gain cannot be compared with")
+    return not other
+
+
 def _converged(adequacy: Any, say: Progress) -> bool:
     """Whether the nominal may be challenged: not when a black box shows that it did not
     converge (any term would absorb that misfit; :func:`_discovery` refuses it too)."""
@@ -733,7 +750,7 @@ def _step(trial: Trial, data: IdentificationData, before: np.ndarray, after: np.
         segments[o] = {"start_s": s0.start_times.tolist(), "rms_before": s0.residual_rms.tolist(),
                        "rms_after": s1.residual_rms.tolist()}
     return Step(trial.effect, trial.description, dict(trial.parameters), dict(trial.std),
-                fit_before, fit_after, removed, bands, segments)
+                fit_before, fit_after, removed, bands, segments, evidence=trial.evidence)
 
 
 def _summary(verdict: str, effects: Sequence[str], before: Mapping[str, float],

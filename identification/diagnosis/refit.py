@@ -59,6 +59,10 @@ class Trial:
     accepted: bool = False
     failed: tuple[str, ...] = ()
     message: str = ""
+    evidence: str = ""
+    """Empty when judged sample by sample on the withheld run; else how it passed instead (a
+    contact loss on its force's distribution,
+    :mod:`~panto.identification.diagnosis.contact_statistics`)."""
 
 
 @dataclass
@@ -135,7 +139,8 @@ def try_candidate(model: Model, candidate: Mapping[str, Any], current: np.ndarra
                      **linear_explains(effect, trial, search.linear_level)})
     say(f"  {effect}: dBIC {trial.delta_bic:.1f}, |theta|/sigma {trial.significance:.1f}, "
         f"validation +{trial.improvement:.2f} points (fold spread {trial.fold_spread:.2f}): "
-        + ("accepted" if trial.accepted else "rejected (" + ", ".join(trial.failed) + ")"))
+        + ("accepted" + (f" on the {trial.evidence}" if trial.evidence else "")
+           if trial.accepted else "rejected (" + ", ".join(trial.failed) + ")"))
     return trial, new, simulated
 
 
@@ -320,8 +325,8 @@ def linear_explains(effect: str, trial: Mapping[str, Any],
     adequacy's linear black box (of the nominal's order and two more states) on any output by the
     relevance floor (:attr:`DiagnosisOptions.adequacy`): on the withheld run, since the black box
     has more parameters than the refitted structure, a training comparison favours it."""
-    if level is None or effect not in NONLINEAR_EFFECTS:
-        return {}
+    if level is None or effect not in NONLINEAR_EFFECTS or trial.get("evidence"):
+        return {}  # a linear black box cannot lose contact: no distribution test for it
     gains = {o: trial["fit_validation"].get(o, math.nan) - level[o] for o in level}
     if any(g > IMPROVEMENT_FLOOR for g in gains.values()):
         return {}

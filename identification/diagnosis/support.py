@@ -44,6 +44,7 @@ from panto.identification.estimation.base import (IdentificationData, Identifica
 from panto.identification.diagnosis.effects import SignalRoles
 from panto.identification.structures import registry
 from panto.identification.diagnosis.residual_analysis import excited_band
+from panto.identification.diagnosis.contact_statistics import statistics_evidence
 
 #: Parameter of an effect whose significance is tested (default: its first parameter).
 MAGNITUDE = {"extra_mode": "extra_mode:gain"}
@@ -287,12 +288,25 @@ def judge_trial(candidate: Mapping[str, Any], refit: Refit, model: Any,
         failed.append(f"{NO_GAIN_REASONS[1]} {improvement:.2f} not above the folds' standard "
                       f"error {standard_error:.2f}, and its change explains the withheld "
                       f"residual with t = {max(local.values()):.1f} <= {LOCAL_T:g}")
+    evidence = ""
+    force = _force_output(structure, validation)
+    if effect == "contact_loss" and failed and force is not None and all(
+            f.startswith(NO_GAIN_REASONS) or " worse on validation by " in f for f in failed):
+        statistics = statistics_evidence(validation, current, refit.simulated, force, folds)
+        if statistics["accepted"]:  # the training tests passed; sample by sample it cannot
+            failed, evidence = [], "statistics: " + statistics["reason"]
     return {"effect": effect, "variant": candidate["variant"], "err": candidate["err"],
             "description": effect, "parameters": own, "std": std, "significance": significance,
             "delta_bic": delta_bic, "improvement": improvement,
             "fold_improvements": tuple(per_fold), "fold_spread": spread,
             "fit_train": dict(result.fit), "fit_validation": fit_after, "accepted": not failed,
-            "failed": tuple(failed), "message": result.message}
+            "failed": tuple(failed), "message": result.message, "evidence": evidence}
+
+
+def _force_output(structure: Any, validation: IdentificationData) -> str | None:
+    """The contact-force output of an augmented `structure` (its signal roles), if measured."""
+    name = getattr(getattr(structure, "roles", None), "force", None)
+    return name if name in validation.output_names else None
 
 
 def withheld_gain(validation: IdentificationData, current: np.ndarray, simulated: np.ndarray,
