@@ -20,11 +20,7 @@ Output side (added to one output, the *target*)
                        ``eta``; :func:`~panto.identification.diagnosis.effects.sensor_acceleration`);
     ``extra_mode``     ``y + g (H - 1) w~``, ``H = w_0^2 / (s^2 + 2 zeta w_0 s + w_0^2)`` (Tustin)
                        an unmodelled compliant mode (support resonance) driven by ``w``
-                       (gain ``g``, frequency ``f_0`` [Hz], damping ``zeta``); ``w`` the
-                       force or the sensor side's motion
-                       (:func:`~panto.identification.diagnosis.effects.mode_drives`), the
-                       refit's start from a grid scan
-                       (:func:`~panto.identification.diagnosis.mode_scan.located_mode`).
+                       (gain ``g``, frequency ``f_0`` [Hz], damping ``zeta``).
 Inside the dynamics
     the nominal's own parameters when it has them: the nonlinear pantograph (``physical``):
     ``coulomb_friction -> T_f`` (hinge friction torque), ``cubic_stiffness -> k_c3`` (head
@@ -413,12 +409,6 @@ class AugmentedStructure(ModelStructure):
         raise IdentificationError(f"{self.name}: signal role {name!r} is neither an input nor a "
                                   f"simulated output ({data.input_names}, {self.output_names})")
 
-    def mode_drive(self, data: IdentificationData, y: np.ndarray) -> np.ndarray:
-        """The signal driving an ``extra_mode`` (``setting["drive"]``, else the transformed
-        input): an input of `data` or a column of the free run `y` (the wrapped model's
-        outputs)."""
-        return self._signal(self.setting.get("drive") or self._input(), data, y)
-
     def _motion(self, data: IdentificationData, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         position = self._signal(self.roles.position, data, y)
         return motion(position, data.sample_period, _DERIVATIVE_CUTOFF)
@@ -436,7 +426,7 @@ class AugmentedStructure(ModelStructure):
             acceleration = sensor_acceleration(self._signal(sensor, data, y), data.sample_period)
             y[:, target] -= values[f"sensor_inertia:{self._force()}"] * acceleration
         elif effect == "extra_mode":
-            drive = self.mode_drive(data, y)
+            drive = self._signal(s.get("drive") or self._input(), data, y)
             y[:, target] += values["extra_mode:gain"] * mode_response(
                 drive - drive[0], values["extra_mode:frequency"], values["extra_mode:damping"],
                 data.sample_period)

@@ -15,8 +15,7 @@ dead_zone         ``dz(u~, b) - u~ = -clip(u~, -b, b)`` of actuators; backlash `
 input_delay       ``u(t - d) - u(t)`` over delays ``d``
 actuator_lag      ``L_T u - u``, ``L_T`` the first-order low-pass of time constant ``T``
 sensor_inertia    acceleration of the sensor side (``x_s''``, :func:`sensor_acceleration`)
-extra_mode        ``(H_{f,zeta} - 1) w``: dynamic part of a 2nd-order mode driven by ``w``, the
-                  force or the motion of a point it may hang on (:func:`mode_drives`)
+extra_mode        ``(H_{f,zeta} - 1) w``: dynamic part of a 2nd-order mode driven by force/input
 contact_loss      ``max(F, 0) - F`` of the simulated force
 offset            ``1``
 saturation        ``clip(s, q_lo, q_hi) - s`` at input/force quantiles
@@ -76,8 +75,7 @@ class SignalRoles:
     actuators : tuple of str
         Inputs that may be delayed, lagged, saturated or pass a dead zone (``eta``, ``p`` [bar]).
     mode_drive : str or None
-        Signal driving an unmodelled mode; None: the candidates of :func:`mode_drives` (`force`
-        or else the first actuator, then `sensor_position`).
+        Signal driving an unmodelled mode; None: `force`, else the first actuator.
     sensor_position : str or None
         Position of the force sensor's moving side: a mass between the sensor and the structure
         moves with it (pantograph: the linear motor's bar height ``eta`` [m], the rig's aluminium
@@ -290,29 +288,6 @@ def _modes(w: np.ndarray, name: str, options: RegressorOptions, dt: float) -> di
     return out
 
 
-def mode_drives(roles: SignalRoles, names: Sequence[str]) -> tuple[str, ...]:
-    """The signals (among `names`) that may drive an unmodelled mode: ``roles.mode_drive`` alone
-    when given; else the force (or the first actuator without one), then the motion of the
-    force sensor's side, ``roles.sensor_position`` (the pantograph's wire height).
-
-    A mass ``m_e`` on a spring-damper (``f_e``, ``zeta``) attached to a point moving with ``x``
-    pulls on it with ``-m_e s^2 H x``, ``H = (2 zeta w s + w^2) / (s^2 + 2 zeta w s + w^2)``: an
-    added mass (the nominal absorbs it) and a resonant part, a second-order filter of the
-    point's motion, that reaches the measured force through the structure; under a stiff contact
-    the head moves with the wire height. Driven by the simulated force instead, the same
-    output-side mode closed 0.7 of the 4.2 points such an absorber (6.4 Hz, 13 % of the head's
-    mass) costs a two-mass nominal, driven by the wire height 3.7
-    (``benchmarks/diagnosis_families.py``, tuning case two-mass/extra_mode/37). The position
-    role is not a drive: where it is a simulated output, a mode driven by it imitates that
-    sensor's own dynamics (a lag or backlash of the sensor was named a mode)."""
-    if roles.mode_drive is not None:
-        return (roles.mode_drive,) if roles.mode_drive in names else ()
-    actuators = [a for a in roles.actuators if a in names]
-    first = roles.force if roles.force in names else (actuators or [None])[0]
-    return tuple(dict.fromkeys(d for d in (first, roles.sensor_position)
-                               if d is not None and d in names))
-
-
 def _saturations(signals: Mapping[str, np.ndarray], names: Sequence[str],
                  options: RegressorOptions) -> dict[str, Regressor]:
     out = {}
@@ -384,9 +359,9 @@ def build_candidate_regressors(signals: Mapping[str, np.ndarray], sample_period:
     elif sensor is not None:
         out["sensor_inertia"] = {f"{sensor}''": (sensor_acceleration(get(sensor), dt),
                                                  {"signal": sensor})}
-    drives = mode_drives(roles, list(signals))
-    if drives:
-        out["extra_mode"] = {k: v for d in drives for k, v in _modes(get(d), d, options, dt).items()}
+    drive = roles.mode_drive or (roles.force if has(roles.force) else (actuators or [None])[0])
+    if drive is not None and has(drive):
+        out["extra_mode"] = _modes(get(drive), drive, options, dt)
     if has(roles.force):
         force = get(roles.force)
         out["contact_loss"] = {"max(F,0)-F": (np.maximum(force, 0) - force, {})}

@@ -22,7 +22,6 @@ import numpy as np
 from panto.identification.diagnosis.augmentations import (INSIDE, AugmentedStructure,
                                                           describe_augmentation)
 from panto.identification.diagnosis.effects import NONLINEAR_EFFECTS, SignalRoles
-from panto.identification.diagnosis.mode_scan import located_mode
 from panto.identification.diagnosis.nominal import Progress, fit_per_output, simulate
 from panto.identification.diagnosis.support import (IMPROVEMENT_FLOOR, Refit, judge_trial,
                                                      residuals)
@@ -198,10 +197,8 @@ def refit(structure: AugmentedStructure, model: Model, train: IdentificationData
            free: tuple[str, ...], fit_options: Mapping[str, Any], from_defaults: bool = False
            ) -> tuple[Any, Model]:
     """The result and the refitted model of an output-error refit from the current parameters
-    (`from_defaults`: the structure's default ones) and the effect's start values (a dead zone's
-    from :func:`located_zone`, a mode's from the grid scan of
-    :func:`~panto.identification.diagnosis.mode_scan.located_mode`); when the start is invalid
-    (an unstable feedback), from the effect scaled towards its neutral value."""
+    (`from_defaults`: the structure's default ones) and the effect's start values; when the start
+    is invalid (an unstable feedback), from the effect scaled towards its neutral value."""
     starts, bounds = structure.nominal(), structure.bounds()
     initial = {k: v for k, v in (starts if from_defaults else model.parameters).items()
                if k in structure.parameter_names and k not in structure.effect_parameters}
@@ -216,7 +213,7 @@ def refit(structure: AugmentedStructure, model: Model, train: IdentificationData
         start = {k: float(min(max(v, bounds[k][0]), bounds[k][1])) if k in bounds else v
                  for k, v in start.items()}
         if factor == 1.0:
-            start = located_mode(structure, located_zone(structure, start, train), train)
+            start = located_zone(structure, start, train)
         if own and factor == 1.0 and not from_defaults:
             # staged: the effect's own parameters first, the nominal held where it is (a few
             # well-conditioned unknowns), then everything from there; a joint start from a
