@@ -1,14 +1,15 @@
-"""Small C kernels compiled at run time and cached by the hash of their source.
+"""Small C kernels compiled at run time and cached by the hash of their source and flags.
 
 The catenary step (:mod:`panto.catenary_cosim.kernel`), the co-simulation loop and the friction
 oscillators' splitting loop (:mod:`panto.identification.structures.friction_kernel`) are plain
 C99 compiled with the system compiler (``$CC``, ``cc`` or ``gcc``) into
-``$PANTO_KERNEL_CACHE`` or ``~/.cache/panto/kernels/<first 12 hex of the source's SHA-256>/``
-the first time they are needed, built in a temporary file and moved into place so that parallel
-workers never load half a file; where the cache cannot be written, into a private temporary
-folder. Without a compiler :func:`build_library` gives None and the callers keep their Python
-path. A :class:`Kernel` names one kernel's library, source, flags, environment switch and
-ctypes typing, so that each calling module keeps only its cached ``load_kernel``-style function.
+``$PANTO_KERNEL_CACHE`` or ``~/.cache/panto/kernels/<first 12 hex of the SHA-256 of source and
+flags>/`` the first time they are needed, built in a temporary file and moved into place so
+that parallel workers never load half a file; where the cache cannot be written, into a
+private temporary folder. Without a compiler :func:`build_library` gives None and the callers
+keep their Python path. A :class:`Kernel` names one kernel's library, source, flags,
+environment switch and ctypes typing, so that each calling module keeps only its cached
+``load_kernel``-style function.
 """
 from __future__ import annotations
 
@@ -39,10 +40,13 @@ def find_compiler() -> str | None:
     return None
 
 
-def cache_folder(source: str) -> Path:
-    """The cache folder of the C `source` (its hash under the kernel cache)."""
+def cache_folder(source: str, flags: tuple[str, ...] | None = None) -> Path:
+    """The cache folder of the C `source` built with `flags` (their hash under the kernel cache:
+    a changed flag, such as the ``-ffp-contract=off`` a bit-for-bit kernel rests on, never meets
+    a library built without it)."""
     base = os.environ.get(CACHE_VARIABLE) or Path.home() / ".cache" / "panto" / "kernels"
-    return Path(base) / hashlib.sha256(source.encode()).hexdigest()[:12]
+    text = source if flags is None else source + "\0" + "\0".join(flags)
+    return Path(base) / hashlib.sha256(text.encode()).hexdigest()[:12]
 
 
 def build(target: Path, source: str, flags: tuple[str, ...], compiler: str | None) -> None:
@@ -65,7 +69,7 @@ def build_library(source: str, name: str, flags: tuple[str, ...] = ("-O2",),
     """The shared library ``name.so`` compiled from `source` (cached, built on first use with the
     compiler `find` names; in a private temporary folder when the cache cannot be written), or
     None if it cannot be built."""
-    target = cache_folder(source) / f"{name}.so"
+    target = cache_folder(source, flags) / f"{name}.so"
     try:
         if not target.exists():
             compiler = find()
@@ -99,8 +103,8 @@ class Kernel:
     """Environment variable whose ``0`` (``false``/``no``/``off``) switches the kernel off."""
     flags: tuple[str, ...] = ("-O2",)
     """Compiler flags (``-fPIC -shared`` and ``-lm`` are added)."""
-    source: str | Path = ""
-    """The C source, or the file holding it (read at each :meth:`load`)."""
+    source: str | Path | None = None
+    """The C source, or the file holding it (read at each :meth:`load`); None: given per call."""
     bind: Callable[[ctypes.CDLL], Any] = _untyped
     """Types the entry points of a loaded library and gives what :meth:`load` returns."""
     find: Callable[[], str | None] = find_compiler
@@ -117,6 +121,8 @@ class Kernel:
         loaded, or it lacks an entry point (not our library). Not cached."""
         try:
             if source is None:
+                if self.source is None:
+                    return None
                 source = self.source if isinstance(self.source, str) else \
                     self.source.read_text(encoding="utf-8")
         except OSError:

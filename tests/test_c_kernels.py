@@ -24,7 +24,9 @@ def test_a_kernel_builds_from_a_file_binds_and_computes(tmp_path, monkeypatch):
     kernel = c_kernels.Kernel("square_sum", "PANTO_TEST_KERNEL", ("-O2",), path, _typed)
     function = kernel.load()
     assert function(3.0, 4.0) == 25.0
-    assert (c_kernels.cache_folder(SOURCE) / "square_sum.so").is_file()
+    assert (c_kernels.cache_folder(SOURCE, ("-O2",)) / "square_sum.so").is_file()
+    assert c_kernels.cache_folder(SOURCE, ("-O1",)) != c_kernels.cache_folder(SOURCE, ("-O2",))
+    assert c_kernels.Kernel("none", "PANTO_TEST_KERNEL").load() is None  # no source at all
     assert kernel.load(SOURCE + "\n")(1.5, 2.0) == 6.25  # a source given per call
     missing = c_kernels.Kernel("absent", "PANTO_TEST_KERNEL", source=SOURCE,
                                bind=lambda library: library.no_such_function)

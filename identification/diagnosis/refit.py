@@ -120,7 +120,8 @@ def try_candidate(model: Model, candidate: Mapping[str, Any], current: np.ndarra
             simulated = _finite_run(new, validation, search.validation_shift)
         trial = judge_trial(candidate, Refit(structure, result, simulated), model, train,
                             validation, current, search.options.folds)
-        if not trial["accepted"] and _second_start_due(effect, search, current):
+        if (not trial["accepted"] or trial["evidence"]) and \
+                _second_start_due(effect, search, current):
             # an effect inside the dynamics (contact loss, friction, a hardening spring) bends
             # the nominal fitted without it far from its own optimum (a flying head fitted with
             # a bilateral contact), and so does a linear one that adds dynamics while a linear

@@ -291,9 +291,10 @@ def judge_trial(candidate: Mapping[str, Any], refit: Refit, model: Any,
     evidence = ""
     force = _force_output(structure, validation)
     if effect == "contact_loss" and failed and force is not None and all(
-            f.startswith(NO_GAIN_REASONS) or " worse on validation by " in f for f in failed):
+            f.startswith(NO_GAIN_REASONS) or f.startswith(f"{force} worse on validation by ")
+            for f in failed):  # the training tests passed; only the force's fit sample by sample
         statistics = statistics_evidence(validation, current, refit.simulated, force, folds)
-        if statistics["accepted"]:  # the training tests passed; sample by sample it cannot
+        if statistics["accepted"]:
             failed, evidence = [], "statistics: " + statistics["reason"]
     return {"effect": effect, "variant": candidate["variant"], "err": candidate["err"],
             "description": effect, "parameters": own, "std": std, "significance": significance,
