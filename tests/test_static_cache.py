@@ -24,19 +24,19 @@ FUNCTIONS = ("phi2", "phi3", "reach", "height", "balance", "linear")
 SIZES = (len(lin.parameter_defaults()[0]), 3, 2)
 
 
-#: Renames lambdify's argument placeholders ``_Dummy_<n>`` by their order of appearance: ``n``
-#: counts the placeholders the process made before (other tests, other models), so only the
-#: names differ between processes, never an operation.
-NORMALISE = ("import re\n"
-             "def normalised(source):\n"
-             "    names = {}\n"
-             "    return re.sub(r'_Dummy_\\d+', lambda m: names.setdefault(m.group(0), "
-             "f'_arg{len(names)}'), source)\n")
-exec(NORMALISE)  # noqa: S102 - defines normalised(), the same text the subprocess runs
+def normalised(source: str) -> str:
+    """`source` with lambdify's argument placeholders ``_Dummy_<n>`` renamed by their order of
+    appearance: ``n`` counts the placeholders the process made before (other tests, other
+    models), so only the names differ between processes, never an operation."""
+    import re
+
+    names: dict[str, str] = {}
+    return re.sub(r"_Dummy_\d+", lambda m: names.setdefault(m.group(0), f"_arg{len(names)}"),
+                  source)
 
 
 def _digest_of_sources(functions) -> str:
-    return hashlib.sha256("".join(normalised(inspect.getsource(functions[k]))  # noqa: F821
+    return hashlib.sha256("".join(normalised(inspect.getsource(functions[k]))
                                   for k in FUNCTIONS).encode()).hexdigest()
 
 
@@ -102,8 +102,8 @@ def _flat(nested) -> list[float]:
 def test_another_process_derives_the_same_source(fresh):
     """The cache is written by one process and read by others: the derivation must not depend
     on the process (string hashing is randomised per process; the placeholders' numbers count
-    what the process did before, see :data:`NORMALISE`)."""
-    code = (NORMALISE + "import hashlib, inspect\n"
+    what the process did before, see :func:`normalised`)."""
+    code = (inspect.getsource(normalised) + "import hashlib, inspect\n"
             "from panto.identification.structures import linearisation as lin\n"
             "f = lin.derive_static_functions()\n"
             f"print(hashlib.sha256(''.join(normalised(inspect.getsource(f[k])) for k in "
