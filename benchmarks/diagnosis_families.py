@@ -334,7 +334,9 @@ def markdown(report: dict) -> str:
     """The report as markdown: settings, scores, confusion matrices, every case."""
     s, settings = report["summary"], report["settings"]
     lines = [f"# Diagnosis on independent benchmark families: {settings['split']} split",
-             "", f"`{settings['command']}`", "",
+             "", f"`{settings['command']}`" + (
+                 f" (scores recomputed later: `{settings['rescored']}`)"
+                 if settings.get("rescored") else ""), "",
              f"{len(report['cases'])} cases{'' if report['complete'] else ' (INCOMPLETE)'}, "
              f"options {settings['options'] or 'default'}, {settings['workers']} worker(s), "
              f"{settings['wall_s']:.0f} s, {settings['platform']}. Plants: "
@@ -436,16 +438,18 @@ def rescore(path: Path, quiet: bool = False) -> int:
     """Score the stored report ``path`` (``.json``) again and rewrite its ``.json`` and ``.md``.
 
     Only the scores are recomputed from each case's recorded outcome, fits and truth; the runs,
-    their settings and the command that produced them are kept. 2 when the file cannot be read.
+    their settings and the command that produced them are kept, the rescoring is noted in
+    ``settings["rescored"]``. 2 when the file cannot be read or is not such a report.
     """
     try:
         report = json.loads(path.read_text())
         records = [score(dict(r)) for r in report["cases"]]
-        settings = report["settings"]
+        settings = {**report["settings"], "rescored": f"benchmarks/diagnosis_families.py "
+                                                      f"--rescore {path.name}"}
+        write_report(path.with_suffix(""), records, settings, report.get("complete", True))
     except (OSError, ValueError, KeyError, TypeError) as error:
         print(f"error: cannot rescore {path}: {error}", file=sys.stderr)
         return 2
-    write_report(path.with_suffix(""), records, settings, report.get("complete", True))
     say(f"rescored {path} ({len(records)} cases)", quiet)
     return 0
 

@@ -282,5 +282,6 @@ def test_rescoring_a_stored_report_keeps_every_outcome(harness, tmp_path):
     assert again["summary"]["library_top1_all"]["right"] == 1
     # (0.1^2 - 0.06^2) / (0.1^2 - 0.05^2) of the gap to the plant closed by the named case
     assert again["cases"][1]["effect_gap_closed_main"] == pytest.approx(0.0064 / 0.0075)
+    assert again["settings"]["command"] == "x" and "--rescore" in again["settings"]["rescored"]
     (tmp_path / "broken.json").write_text("{")
     assert harness.main(["--rescore", str(tmp_path / "broken.json"), "--quiet"]) == 2
