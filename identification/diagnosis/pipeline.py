@@ -79,7 +79,7 @@ from panto.identification.diagnosis.nominal import (Progress, adequacy_quietly, 
                                                     fit_per_output, indented, simulate)
 from panto.identification.diagnosis.parallel import map_trials, resolve_workers, trial_pool
 from panto.identification.diagnosis.ranking import rank_candidates
-from panto.identification.diagnosis.refit import Model, Search, Trial, try_candidate
+from panto.identification.diagnosis.refit import Model, Search, Trial, continue_refit, try_candidate
 from panto.identification.diagnosis.residual_analysis import (ErrorModelOptions, OutputAnalysis,
                                                              analyse_residuals)
 from panto.identification.diagnosis.residual_energy import jsonable
@@ -428,7 +428,8 @@ def _search(model: Model, before: np.ndarray, candidates: Sequence[str], search:
             (", ".join(f"{c['effect']} (ERR {c['err']:.3f})" for c in ranking["top"]) or
              "no significant candidate"))
         trials = map_trials(try_candidate, model, ranking["top"], current, search, pool)
-        trials += _between_runs(model, current, remaining, search)
+        trials = _settle_ties(trials, ranking["top"], model, current, search) + \
+            _between_runs(model, current, remaining, search)
         passing = [t for t in trials if t[0].accepted]
         rounds.append({"ranking": ranking["per_output"], "tried": [t[0].__dict__ for t in trials]})
         if not passing:
@@ -719,6 +720,25 @@ def _choose(passing: Sequence[tuple[Trial, Model, np.ndarray]], folds: int
         else 0.0
     close = [t for t in passing if t[0].improvement >= best.improvement - tolerance]
     return min(close, key=lambda t: t[0].delta_bic)
+
+
+def _settle_ties(trials: list, candidates: Sequence[Mapping[str, Any]], model: Model,
+                 current: np.ndarray, search: Search) -> list:
+    """`trials` (one per candidate, in order) with the refits of the passing candidates the
+    withheld run cannot tell apart (:func:`_choose`'s tolerance) continued where they stopped on
+    their budget (:func:`~panto.identification.diagnosis.refit.continue_refit`): their training
+    ``dBIC`` then decides between optima, not between where two budgets ran out."""
+    passing = [t for t in trials if t[0].accepted]
+    if len(passing) < 2:
+        return trials
+    best = max(passing, key=lambda t: t[0].improvement)[0]
+    tolerance = best.fold_spread / math.sqrt(max(search.options.folds, 1)) \
+        if math.isfinite(best.fold_spread) else 0.0
+    close = {id(t[0]) for t in passing if t[0].improvement >= best.improvement - tolerance}
+    if len(close) < 2:
+        return trials
+    return [continue_refit(candidate, t, model, current, search) if id(t[0]) in close else t
+            for candidate, t in zip(candidates, trials)]
 
 
 def _alternatives(chosen: Trial, passing: Sequence[tuple[Trial, Model, np.ndarray]],
