@@ -220,8 +220,9 @@ def effect_gap_closed(before: float | None, after: float | None,
     """
     if before is None or after is None or ceiling is None or ceiling - before < 0.1:
         return None
-    gap = (1 - before / 100) ** 2 - (1 - ceiling / 100) ** 2
-    return ((1 - before / 100) ** 2 - (1 - after / 100) ** 2) / gap
+    from panto.identification.diagnosis.benchmark import gap_closed
+
+    return gap_closed({"o": before}, {"o": after}, {"o": ceiling})
 
 
 def score(record: dict) -> dict:

@@ -716,10 +716,15 @@ def _choose(passing: Sequence[tuple[Trial, Model, np.ndarray]], folds: int
     and a compliant mode (three) can both improve a run excited below the mode; the simpler one
     wins unless the mode is better on the withheld data beyond its uncertainty."""
     best = max(passing, key=lambda t: t[0].improvement)[0]
-    tolerance = best.fold_spread / math.sqrt(max(folds, 1)) if math.isfinite(best.fold_spread) \
-        else 0.0
-    close = [t for t in passing if t[0].improvement >= best.improvement - tolerance]
+    close = [t for t in passing if t[0].improvement >= best.improvement - _tolerance(best, folds)]
     return min(close, key=lambda t: t[0].delta_bic)
+
+
+def _tolerance(trial: Trial, folds: int) -> float:
+    """The standard error of `trial`'s withheld gain over the blocked folds
+    (``spread / sqrt(folds)``): gains closer than that to it the withheld run cannot tell apart."""
+    return trial.fold_spread / math.sqrt(max(folds, 1)) if math.isfinite(trial.fold_spread) \
+        else 0.0
 
 
 def _settle_ties(trials: list, candidates: Sequence[Mapping[str, Any]], model: Model,
@@ -732,8 +737,7 @@ def _settle_ties(trials: list, candidates: Sequence[Mapping[str, Any]], model: M
     if len(passing) < 2:
         return trials
     best = max(passing, key=lambda t: t[0].improvement)[0]
-    tolerance = best.fold_spread / math.sqrt(max(search.options.folds, 1)) \
-        if math.isfinite(best.fold_spread) else 0.0
+    tolerance = _tolerance(best, search.options.folds)
     close = {id(t[0]) for t in passing if t[0].improvement >= best.improvement - tolerance}
     if len(close) < 2:
         return trials
@@ -748,8 +752,7 @@ def _alternatives(chosen: Trial, passing: Sequence[tuple[Trial, Model, np.ndarra
     away (Kass & Raftery 1995: below 10 the evidence for one over the other is not strong). A
     lag much shorter than the excitation's periods acts like a delay: on such a run both are
     named, the diagnosis' first (the lower ``dBIC``) and the other as equally supported."""
-    tolerance = chosen.fold_spread / math.sqrt(max(folds, 1)) \
-        if math.isfinite(chosen.fold_spread) else 0.0
+    tolerance = _tolerance(chosen, folds)
     return tuple(t.effect for t, _, _ in passing
                  if t.effect != chosen.effect and t.improvement >= chosen.improvement - tolerance
                  and abs(t.delta_bic - chosen.delta_bic) < -BIC_THRESHOLD)
