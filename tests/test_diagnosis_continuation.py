@@ -64,3 +64,37 @@ def test_a_converged_refit_is_left_as_it_is(stopped):
     candidate, entry, model, current, search = stopped
     continued = continue_refit(candidate, entry, model, current, search)
     assert continue_refit(candidate, continued, model, current, search) is continued
+
+
+def test_the_chosen_refit_is_continued_to_its_optimum_before_it_is_accepted(stopped):
+    from panto.identification.diagnosis.pipeline import _choose_converged
+
+    candidate, entry, model, current, search = stopped
+    assert entry[0].accepted and "maximum" in entry[0].message
+    trials, chosen = _choose_converged([entry], [candidate], model, current, search)
+    assert chosen is trials[0] and chosen is not entry
+    assert chosen[0].continued and chosen[0].message.startswith("converged")
+    assert _cost(chosen, search) < _cost(entry, search)
+    assert chosen[1].parameters["actuator_lag:u"] == pytest.approx(LAG, rel=0.05)
+
+
+def test_a_rejected_trial_is_never_chosen_nor_continued(stopped):
+    import dataclasses
+
+    from panto.identification.diagnosis.pipeline import _choose_converged
+
+    candidate, entry, model, current, search = stopped
+    rejected = (dataclasses.replace(entry[0], accepted=False),) + tuple(entry[1:])
+    trials, chosen = _choose_converged([rejected], [candidate], model, current, search)
+    assert chosen is None and trials == [rejected]
+
+
+def test_the_report_says_when_an_accepted_refit_did_not_converge():
+    from panto.identification.diagnosis.pipeline import Step
+    from panto.identification.diagnosis.report import _not_converged
+
+    step = Step("actuator_lag", "lag", {}, {}, {}, {}, {}, {}, {},
+                refit="not converged: maximum of 1200 model evaluations reached")
+    assert "maximum of 1200 model evaluations" in _not_converged(step)
+    assert _not_converged(Step("actuator_lag", "lag", {}, {}, {}, {}, {}, {}, {},
+                               refit="converged: the gradient vanishes")) == ""

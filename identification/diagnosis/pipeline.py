@@ -79,7 +79,8 @@ from panto.identification.diagnosis.nominal import (Progress, adequacy_quietly, 
                                                     fit_per_output, indented, simulate)
 from panto.identification.diagnosis.parallel import map_trials, resolve_workers, trial_pool
 from panto.identification.diagnosis.ranking import rank_candidates
-from panto.identification.diagnosis.refit import Model, Search, Trial, continue_refit, try_candidate
+from panto.identification.diagnosis.refit import (Model, Search, Trial, continue_refit,
+                                                  stopped_on_budget, try_candidate)
 from panto.identification.diagnosis.residual_analysis import (ErrorModelOptions, OutputAnalysis,
                                                              analyse_residuals)
 from panto.identification.diagnosis.residual_energy import jsonable
@@ -116,6 +117,10 @@ class Step:
     """Empty when the withheld run confirmed it sample by sample; else the evidence it passed on
     instead (a contact loss on its force's distribution,
     :mod:`~panto.identification.diagnosis.contact_statistics`)."""
+    refit: str = ""
+    """How the effect's refit on the training run ended (``converged: ...`` or ``not converged:
+    maximum of N model evaluations reached``, after the continuation of
+    :func:`_choose_converged`): whether its parameters are shown to be at an optimum."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -428,14 +433,16 @@ def _search(model: Model, before: np.ndarray, candidates: Sequence[str], search:
             (", ".join(f"{c['effect']} (ERR {c['err']:.3f})" for c in ranking["top"]) or
              "no significant candidate"))
         trials = map_trials(try_candidate, model, ranking["top"], current, search, pool)
-        trials = _settle_ties(trials, ranking["top"], model, current, search) + \
-            _between_runs(model, current, remaining, search)
-        passing = [t for t in trials if t[0].accepted]
+        trials = _settle_ties(trials, ranking["top"], model, current, search)
+        trials, chosen = _choose_converged(
+            trials + _between_runs(model, current, remaining, search), ranking["top"], model,
+            current, search)
         rounds.append({"ranking": ranking["per_output"], "tried": [t[0].__dict__ for t in trials]})
-        if not passing:
+        if chosen is None:
             say("diagnose: no candidate passes on the withheld data; stop")
             break
-        trial, new_model, simulated = _choose(passing, options.folds)
+        trial, new_model, simulated = chosen
+        passing = [t for t in trials if t[0].accepted]
         alternatives = _alternatives(trial, passing, options.folds)
         steps.append(dataclasses.replace(_step(trial, validation, current, simulated),
                                          alternatives=alternatives))
@@ -720,6 +727,31 @@ def _choose(passing: Sequence[tuple[Trial, Model, np.ndarray]], folds: int
     return min(close, key=lambda t: t[0].delta_bic)
 
 
+def _choose_converged(trials: list, candidates: Sequence[Mapping[str, Any]], model: Model,
+                      current: np.ndarray, search: Search) -> tuple[list, tuple | None]:
+    """`trials` (the first ones refits of `candidates`, in order; any after them nothing to
+    refit) and :func:`_choose`'s choice among the passing ones (None when none passes), the
+    chosen refit continued first when it stopped on its budget
+    (:func:`~panto.identification.diagnosis.refit.continue_refit`; the trial in `trials`
+    replaced): the accepted effect's parameters, the next round's start and the gap it closes
+    are those of its optimum, not of where the budget ran out (the demo's contact loss and
+    friction both stopped on 400 simulations). A continued refit the withheld run no longer
+    supports is not chosen; the choice is made again among the others."""
+    trials = list(trials)
+    while True:
+        passing = [t for t in trials if t[0].accepted]
+        if not passing:
+            return trials, None
+        chosen = _choose(passing, search.options.folds)
+        index = next(i for i, t in enumerate(trials) if t is chosen)
+        if index >= len(candidates) or chosen[0].continued or not stopped_on_budget(chosen[0]):
+            return trials, chosen
+        continued = continue_refit(candidates[index], chosen, model, current, search)
+        if continued is chosen:  # the continuation failed or found nothing lower
+            return trials, chosen
+        trials[index] = continued
+
+
 def _tolerance(trial: Trial, folds: int) -> float:
     """The standard error of `trial`'s withheld gain over the blocked folds
     (``spread / sqrt(folds)``): gains closer than that to it the withheld run cannot tell apart."""
@@ -778,7 +810,8 @@ def _step(trial: Trial, data: IdentificationData, before: np.ndarray, after: np.
         segments[o] = {"start_s": s0.start_times.tolist(), "rms_before": s0.residual_rms.tolist(),
                        "rms_after": s1.residual_rms.tolist()}
     return Step(trial.effect, trial.description, dict(trial.parameters), dict(trial.std),
-                fit_before, fit_after, removed, bands, segments, evidence=trial.evidence)
+                fit_before, fit_after, removed, bands, segments, evidence=trial.evidence,
+                refit=trial.message)
 
 
 def _summary(verdict: str, effects: Sequence[str], before: Mapping[str, float],

@@ -62,6 +62,8 @@ class Trial:
     """Empty when judged sample by sample on the withheld run; else how it passed instead (a
     contact loss on its force's distribution,
     :mod:`~panto.identification.diagnosis.contact_statistics`)."""
+    continued: bool = False
+    """Whether the refit was continued past the candidates' budget (:func:`continue_refit`)."""
 
 
 @dataclass
@@ -160,7 +162,7 @@ def continue_refit(candidate: Mapping[str, Any], entry: tuple[Trial, Model, np.n
     three-mass/actuator_lag/1250: a lag stopped short on 400 simulations lost to a delay by 227
     dBIC and won by 1230 with four times the budget)."""
     trial, new, _ = entry
-    if "maximum" not in trial.message:
+    if not stopped_on_budget(trial) or trial.continued:
         return entry
     budget = int(search.fit_options.get("max_evaluations") or 400) * CONTINUATION_FACTOR
     try:
@@ -178,13 +180,18 @@ def continue_refit(candidate: Mapping[str, Any], entry: tuple[Trial, Model, np.n
         return entry
     judged = judge_trial(candidate, Refit(further.structure, result, simulated), model,
                          search.train, search.validation, current, search.options.folds)
-    judged = Trial(**{**judged, "description": trial.description,
+    judged = Trial(**{**judged, "description": trial.description, "continued": True,
                       **linear_explains(candidate["effect"], judged, search.linear_level)})
     search.say(f"  {candidate['effect']}: continued ({result.message}): dBIC "
                f"{trial.delta_bic:.1f} -> {judged.delta_bic:.1f}, validation "
                f"+{judged.improvement:.2f} points: "
                + ("accepted" if judged.accepted else "rejected (" + ", ".join(judged.failed) + ")"))
     return judged, further, simulated
+
+
+def stopped_on_budget(trial: Trial) -> bool:
+    """Whether `trial`'s refit stopped on its simulation budget (not shown to be at an optimum)."""
+    return trial.message.startswith("not converged: maximum")
 
 
 def _finite_run(model: Model, validation: IdentificationData,
@@ -377,5 +384,6 @@ def linear_explains(effect: str, trial: Mapping[str, Any],
     return {"accepted": False, "failed": tuple(trial["failed"]) + (reason,)}
 
 
-__all__ = ["Trial", "Model", "Search", "try_candidate", "refit", "linear_explains", "located_zone",
+__all__ = ["Trial", "Model", "Search", "try_candidate", "continue_refit", "stopped_on_budget",
+           "refit", "linear_explains", "located_zone",
            "ZONE_LEVELS", "ZONE_WIDTHS", "ZONE_ZOOMS"]

@@ -154,6 +154,8 @@ def _shrink_blocks(diagnosis: Any, bands: Path | None,
         blocks += [t.heading(step.effect), t.paragraph(step.description)]
         if step.evidence:
             blocks.append(t.paragraph(_evidence_text(step)))
+        if _not_converged(step):
+            blocks.append(t.paragraph(_not_converged(step)))
         blocks += [t.table(["parameter", "value", "± (1 σ)", "unit"], rows),
                    t.table(["output", "fit before [%]", "fit after [%]",
                             "residual energy removed [%]"],
@@ -174,6 +176,17 @@ def _evidence_text(step: Any) -> str:
             "head that leaves the wire may not follow the record (each landing's instant depends "
             "on the last bits of the state), so the fits below can drop although the contact "
             "force's statistics are reproduced.")
+
+
+def _not_converged(step: Any) -> str:
+    """A warning when the step's refit stopped on its simulation budget (:attr:`Step.refit`),
+    else ""."""
+    refit = getattr(step, "refit", "")
+    if not refit.startswith("not converged"):
+        return ""
+    return (f"The refit stopped before it converged ({refit.removeprefix('not converged: ')}): "
+            "its parameters and the fits below are where the budget ran out, not shown to be "
+            "at the training optimum (raise the budget: `panto diagnose --max-evaluations N`).")
 
 
 def step_units(diagnosis: Any, step: Any, units: Mapping[str, str]) -> dict[str, str]:
@@ -213,6 +226,8 @@ def markdown_report(diagnosis: Any, step_unit_maps: list[Mapping[str, str]]) -> 
         lines += ["", f"## {step.effect}", "", step.description, ""]
         if step.evidence:
             lines += [_evidence_text(step), ""]
+        if _not_converged(step):
+            lines += [_not_converged(step), ""]
         if step.parameters:
             lines += ["| parameter | value | ± (1 σ) | unit |", "|---|---|---|---|"]
             lines += [f"| {n} | {format_number(v, 5)} | "
