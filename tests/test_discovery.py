@@ -158,3 +158,25 @@ def test_a_refitted_kink_level_finds_a_sensor_zero_between_the_quantiles():
                             effect(PLANT.simulate(TRUTH, validation)[:, 0]))
     assert refitted.fit_validation_after > truth_fit - 0.5
     assert at_quantiles is None or refitted.gain > at_quantiles.gain
+
+
+def test_a_hypothesis_stopped_on_its_budget_is_continued_to_the_converged_optimum():
+    """With 12 simulations per refit the cubic term's refit stops on its budget far from its
+    optimum; the chosen hypothesis is then continued (three times the budget) from where it
+    stopped and must land where a refit with the default 600 simulations converges."""
+    effect = lambda y: y + 0.15 * y ** 3  # noqa: E731
+    train, validation = _run(1, effect), _run(2, effect)
+    nominal = _nominal(train)
+    options = {"candidates": 1, "families": ("cube",)}
+    lines: list[str] = []
+    short = discover(PLANT, nominal, FREE, train, validation, progress=lines.append,
+                     options=DiscoveryOptions(max_evaluations=12, **options))
+    full = discover(PLANT, nominal, FREE, train, validation, options=DiscoveryOptions(**options))
+    assert short is not None and full is not None and full.message.startswith("converged")
+    stopped = [line for line in lines if line.startswith("discovery: refit with y^3 - y on")]
+    assert stopped and "maximum of 12 model evaluations" in stopped[0], lines
+    assert any(line.startswith("discovery: continued y^3 - y on y") for line in lines), lines
+    assert float(stopped[0].split("-> ")[1].split(" %")[0]) < full.fit_validation_after - 5.0
+    assert short.term == full.term and short.message.startswith("converged")
+    assert short.coefficients[0] == pytest.approx(full.coefficients[0], rel=1e-3)
+    assert short.fit_validation_after == pytest.approx(full.fit_validation_after, abs=0.01)

@@ -56,6 +56,7 @@ from sklearn.linear_model import LassoLarsIC, lars_path, orthogonal_mp
 from panto.identification.diagnosis.parallel import map_replayed
 from panto.identification.estimation.base import (IdentificationData, IdentificationError,
                                                   ModelStructure, fit_percent)
+from panto.identification.diagnosis.refit import CONTINUATION_FACTOR
 from panto.identification.estimation.least_squares import fit_least_squares
 
 #: Term families of the library, in the order they are generated.
@@ -589,12 +590,14 @@ def discover(structure: ModelStructure, parameters: Mapping[str, float], free: S
     if not significant:
         return None
     best, output, i = max(significant, key=lambda h: h[0].fit_train_after - h[0].fit_train_before)
+    terms = [ranked[output][i][0]]
     second = next((t for k, (t, _) in enumerate(ranked[output]) if k != i), None)
     if second is not None:
         pair = refit.run(output, [ranked[output][i][0], second])
         if pair is not None and pair.gain > best.gain + options.second_term_gain and \
                 pair.significant(options.significance):
-            best = pair
+            best, terms = pair, terms + [second]
+    best = refit.resume(best, terms)
     best = replace(best, ranking=tuple((o, t.formula, round(c, 6))
                                        for o, terms in ranked.items() for t, c in terms))
     say(f"discovery: {best.term} on {best.output}: validation fit "
@@ -634,7 +637,30 @@ class _Refit:
             return None
         return hypothesis if math.isfinite(hypothesis.gain) else None
 
-    def _run(self, output: str, terms: Sequence[Term], formula: str) -> Hypothesis:
+    def resume(self, hypothesis: Hypothesis, terms: Sequence[Term]) -> Hypothesis:
+        """`hypothesis` (the refit with `terms`) continued from where it stopped for
+        :data:`~panto.identification.diagnosis.refit.CONTINUATION_FACTOR` times the budget when it stopped on its budget, kept when
+        the continuation fails or ends at a higher training cost: the chosen hypothesis is
+        reported at its optimum, and as the challenge it meets an accepted effect whose refit
+        was continued the same way (:func:`~panto.identification.diagnosis.pipeline.diagnose`)."""
+        if not hypothesis.message.startswith("not converged: maximum"):
+            return hypothesis
+        try:
+            further = self._run(hypothesis.output, terms, hypothesis.term,
+                                initial=hypothesis.parameters,
+                                budget=self.options.max_evaluations * CONTINUATION_FACTOR)
+        except (ValueError, ArithmeticError, np.linalg.LinAlgError) as error:
+            self.say(f"discovery: continuing {hypothesis.term} on {hypothesis.output} failed: "
+                     f"{error}")
+            return hypothesis
+        if not further.fit_train_after >= hypothesis.fit_train_after or \
+                not math.isfinite(further.gain):
+            return hypothesis
+        return replace(further, ranking=hypothesis.ranking)
+
+    def _run(self, output: str, terms: Sequence[Term], formula: str,
+             initial: Mapping[str, float] | None = None, budget: int | None = None
+             ) -> Hypothesis:
         simulated = np.asarray(self.structure.simulate(dict(self.parameters), self.train), float)
         residual = self.train.output(output) - simulated[:, list(self.structure.output_names)
                                                           .index(output)]
@@ -649,16 +675,17 @@ class _Refit:
         keep = np.isfinite(residual)
         start = np.linalg.lstsq(phi[keep], residual[keep], rcond=None)[0]
         model = with_term(self.structure, terms, output, start)
+        values = {**self.parameters, **model.nominal()} if initial is None else \
+            {k: initial[k] for k in model.parameter_names if k in initial}
         result = fit_least_squares(model, self.train.select_outputs([output]),
-                                   free=self.free + model.coefficient_names,
-                                   initial={**self.parameters, **model.nominal()},
-                                   max_evaluations=self.options.max_evaluations,
+                                   free=self.free + model.coefficient_names, initial=values,
+                                   max_evaluations=budget or self.options.max_evaluations,
                                    executor=self.executor)
         before = _fit_on(self.structure, self.parameters, self.validation, output)
         after = _fit_on(model, result.parameters, self.validation, output)
         gap = 1.0 - ((100.0 - after) / (100.0 - before)) ** 2 if before < 100.0 else math.nan
-        self.say(f"discovery: refit with {formula} on {output}: validation fit {before:.2f} "
-                 f"-> {after:.2f} % ({result.message})")
+        self.say(f"discovery: {'continued' if initial else 'refit with'} {formula} on {output}: "
+                 f"validation fit {before:.2f} -> {after:.2f} % ({result.message})")
         return Hypothesis(
             term=formula, families=tuple(t.family for t in terms), output=output,
             coefficients=tuple(result.parameters[n] for n in model.coefficient_names),
