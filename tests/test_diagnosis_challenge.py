@@ -14,7 +14,7 @@ from scipy import signal
 from panto.identification.diagnosis.discovery import (DiscoveryOptions, Signal, Term, discover,
                                                       play, term_library)
 from panto.identification.diagnosis.nominal import fit_nominal
-from panto.identification.diagnosis.pipeline import CHALLENGE, CHALLENGERS, _challenge, challenger
+from panto.identification.diagnosis.challenge import CHALLENGE, CHALLENGERS, challenge, challenger
 from panto.identification.diagnosis.refit import Model
 from panto.identification.diagnosis.support import build_structure
 from panto.identification.estimation.base import (IdentificationData, IdentificationError,
@@ -57,7 +57,7 @@ def test_the_play_term_wins_over_effects_that_gained_less(backlash):
     model, train, validation = backlash
     before = _nominal_fit(model, validation)
     assert before < 95.0  # the backlash costs the linear model fit points
-    hypothesis = _challenge(model, train, validation, {"y": before}, {"y": before + 0.3}, None,
+    hypothesis = challenge(model, train, validation, {"y": before}, {"y": before + 0.3}, None,
                             None)
     assert hypothesis is not None and hypothesis["families"][0] == "play"
     # the backlash explains most of the linear model's validation gap, and no term does better
@@ -71,7 +71,7 @@ def test_the_play_term_wins_over_effects_that_gained_less(backlash):
 def test_effects_that_gained_more_stand(backlash):
     model, train, validation = backlash
     before = _nominal_fit(model, validation)
-    assert _challenge(model, train, validation, {"y": before}, {"y": 99.9}, None, None) is None
+    assert challenge(model, train, validation, {"y": before}, {"y": 99.9}, None, None) is None
 
 
 def test_the_challenge_searches_only_its_families(backlash):
@@ -188,6 +188,6 @@ def test_no_challenge_where_no_term_could_gain_more_than_the_effects(backlash):
     model, train, validation = backlash
     before = _nominal_fit(model, validation)
     lines = []
-    assert _challenge(model, train, validation, {"y": before}, {"y": 100.0 + 1e-9}, None,
+    assert challenge(model, train, validation, {"y": before}, {"y": 100.0 + 1e-9}, None,
                       lines.append) is None
     assert not any("refit" in line for line in lines) and "no output" in lines[-1]

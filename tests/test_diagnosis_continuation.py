@@ -1,6 +1,6 @@
 """A refit that stopped on its budget is continued before two candidates the withheld run cannot
 tell apart are ranked by their training dBIC (identification/diagnosis/refit.py continue_refit,
-pipeline._settle_ties). Plant written here: a second-order system behind a first-order actuator
+choice.settle_ties, choice.choose_converged). Plant written here: a second-order system behind a first-order actuator
 lag (discretised by SciPy with a first-order hold, not by the diagnosis' own filter), nominal
 ``linear-2``."""
 from __future__ import annotations
@@ -67,11 +67,11 @@ def test_a_converged_refit_is_left_as_it_is(stopped):
 
 
 def test_the_chosen_refit_is_continued_to_its_optimum_before_it_is_accepted(stopped):
-    from panto.identification.diagnosis.pipeline import _choose_converged
+    from panto.identification.diagnosis.choice import choose_converged
 
     candidate, entry, model, current, search = stopped
     assert entry[0].accepted and "maximum" in entry[0].message
-    trials, chosen = _choose_converged([entry], [candidate], model, current, search)
+    trials, chosen = choose_converged([entry], [candidate], model, current, search)
     assert chosen is trials[0] and chosen is not entry
     assert chosen[0].continued and chosen[0].message.startswith("converged")
     assert _cost(chosen, search) < _cost(entry, search)
@@ -81,11 +81,11 @@ def test_the_chosen_refit_is_continued_to_its_optimum_before_it_is_accepted(stop
 def test_a_rejected_trial_is_never_chosen_nor_continued(stopped):
     import dataclasses
 
-    from panto.identification.diagnosis.pipeline import _choose_converged
+    from panto.identification.diagnosis.choice import choose_converged
 
     candidate, entry, model, current, search = stopped
     rejected = (dataclasses.replace(entry[0], accepted=False),) + tuple(entry[1:])
-    trials, chosen = _choose_converged([rejected], [candidate], model, current, search)
+    trials, chosen = choose_converged([rejected], [candidate], model, current, search)
     assert chosen is None and trials == [rejected]
 
 

@@ -17,7 +17,8 @@ from scipy import signal as sps
 
 from panto.identification.diagnosis.augmentations import AugmentedStructure, equivalent_input
 from panto.identification.estimation.base import IdentificationData
-from panto.identification.diagnosis.pipeline import DiagnosisOptions, Trial, _choose, diagnose
+from panto.identification.diagnosis.choice import choose
+from panto.identification.diagnosis.pipeline import DiagnosisOptions, Trial, diagnose
 from panto.identification.diagnosis.effects import PANTOGRAPH_ROLES
 from panto.identification.structures.physical import PhysicalLinear
 
@@ -121,11 +122,11 @@ def test_parsimony_decides_between_candidates_the_withheld_data_cannot_tell_apar
     folds = 4
     simple = _trial("sensor_inertia", 2.0, 0.4, -400.0)
     rich = _trial("extra_mode", 2.2, 0.8, -230.0)  # better by 0.2 < its standard error 0.4
-    chosen = _choose([(simple, None, None), (rich, None, None)], folds)[0]
+    chosen = choose([(simple, None, None), (rich, None, None)], folds)[0]
     assert chosen.effect == "sensor_inertia"
     clear = _trial("extra_mode", 4.0, 0.8, -230.0)  # better beyond its standard error
-    assert _choose([(simple, None, None), (clear, None, None)], folds)[0].effect == "extra_mode"
-    assert math.isclose(_choose([(rich, None, None)], folds)[0].improvement, 2.2)
+    assert choose([(simple, None, None), (clear, None, None)], folds)[0].effect == "extra_mode"
+    assert math.isclose(choose([(rich, None, None)], folds)[0].improvement, 2.2)
 
 
 def test_input_side_effects_are_separate_candidates_per_input():
@@ -149,17 +150,17 @@ def test_candidates_the_runs_cannot_tell_apart_are_reported_beside_the_chosen_on
     chosen (lower dBIC) and the lag reported as equally supported; a dBIC 10 or more apart is
     strong evidence (Kass & Raftery), and a gain outside the folds' standard error tells them
     apart on the withheld run."""
-    from panto.identification.diagnosis.pipeline import _alternatives
+    from panto.identification.diagnosis.choice import alternatives
 
     folds = 4
     delay = _trial("input_delay", 3.29, 0.40, -3612.6)
     lag = _trial("actuator_lag", 3.29, 0.40, -3607.2)
     mode = _trial("extra_mode", 0.35, 0.14, -121.4)
     passing = [(t, None, None) for t in (delay, lag, mode)]
-    chosen = _choose(passing, folds)[0]
+    chosen = choose(passing, folds)[0]
     assert chosen.effect == "input_delay"
-    assert _alternatives(chosen, passing, folds) == ("actuator_lag",)
+    assert alternatives(chosen, passing, folds) == ("actuator_lag",)
     far = _trial("actuator_lag", 3.29, 0.40, -3600.0)  # 12.6 apart: strong evidence
-    assert _alternatives(delay, [(delay, None, None), (far, None, None)], folds) == ()
+    assert alternatives(delay, [(delay, None, None), (far, None, None)], folds) == ()
     weaker = _trial("actuator_lag", 2.9, 0.40, -3610.0)  # 0.39 below, tolerance 0.2
-    assert _alternatives(delay, [(delay, None, None), (weaker, None, None)], folds) == ()
+    assert alternatives(delay, [(delay, None, None), (weaker, None, None)], folds) == ()

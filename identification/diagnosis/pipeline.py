@@ -39,7 +39,7 @@ causes it, and how far the gap shrinks once that effect is in the model.
    invalid on the validation run (no static equilibrium at its operating point) is rejected.
    The passing candidate with the largest
    validation improvement is accepted, unless others come within that improvement's standard
-   error: then the lowest ``dBIC`` among them (parsimony, :func:`_choose`); the search repeats on
+   error: then the lowest ``dBIC`` among them (parsimony, :func:`~panto.identification.diagnosis.choice.choose`); the search repeats on
    what remains (``max_effects``). Beside the refits, every round tries ``offset`` *between the
    runs* (a sensor re-zeroed, a preload moved between them; the training run cannot show it):
    measured on the withheld run's first fold, judged on the others by the same validation tests
@@ -51,7 +51,7 @@ causes it, and how far the gap shrinks once that effect is in the model.
 5. **Challenge.** When effects were accepted and a significant gap remains, the out-of-vocabulary
    mechanisms of the discovery library (a play operator of an input or of the output's own
    simulation: hysteresis, backlash; kinks ``|s - c|`` of the output's own simulation: a
-   sign-blind sensor) are refitted in the nominal (:func:`_challenge`). When the best of them gains more validation fit points on its
+   sign-blind sensor) are refitted in the nominal (:func:`~panto.identification.diagnosis.challenge.challenge`). When the best of them gains more validation fit points on its
    output than the accepted effects gain on any output, no effect is named: the vocabulary's best
    closed only part of a gap that something outside it explains better (a hysteresis is not an
    actuator lag because a lag closes a tenth of its gap).
@@ -65,27 +65,27 @@ from __future__ import annotations
 
 import math
 import dataclasses
-import pickle
 import time
-from concurrent.futures import BrokenExecutor
 from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from panto.identification.diagnosis.challenge import (challenge, challengeable, comparable,
+                                                     discovery_hypothesis, withdraw,
+                                                     yielded_summary)
 from panto.identification.diagnosis.effects import EFFECTS, SignalRoles
 from panto.identification.diagnosis.nominal import (Progress, adequacy_quietly, adequate_nominal,
                                                     black_box_validation, fit_nominal,
                                                     fit_per_output, indented, simulate)
 from panto.identification.diagnosis.parallel import map_trials, resolve_workers, trial_pool
 from panto.identification.diagnosis.ranking import rank_candidates
-from panto.identification.diagnosis.refit import (Model, Search, Trial, continue_refit,
-                                                  stopped_on_budget, try_candidate)
+from panto.identification.diagnosis.refit import Model, Search, Trial, try_candidate
 from panto.identification.diagnosis.residual_analysis import (ErrorModelOptions, OutputAnalysis,
                                                              analyse_residuals)
 from panto.identification.diagnosis.residual_energy import jsonable
-from panto.identification.diagnosis import run_offset
-from panto.identification.diagnosis.support import (BIC_THRESHOLD, NO_GAIN_REASONS, build_structure,
+from panto.identification.diagnosis import choice, run_offset
+from panto.identification.diagnosis.support import (NO_GAIN_REASONS, build_structure,
                                                     default_roles, drift_test, effective_samples,
                                                     gap_significance, retuning, settling_time,
                                                     systematic_cost, where_summary)
@@ -111,7 +111,7 @@ class Step:
     segments: Mapping[str, Mapping[str, list]]
     """Per output: window start times [s] and residual RMS before/after."""
     alternatives: tuple[str, ...] = ()
-    """Other candidates the data support as well (:func:`_alternatives`): the withheld gain within
+    """Other candidates the data support as well (:func:`~panto.identification.diagnosis.choice.alternatives`): the withheld gain within
     the folds' standard error, the training ``dBIC`` within 10 (short of strong evidence)."""
     evidence: str = ""
     """Empty when the withheld run confirmed it sample by sample; else the evidence it passed on
@@ -120,7 +120,8 @@ class Step:
     refit: str = ""
     """How the effect's refit on the training run ended (``converged: ...`` or ``not converged:
     maximum of N model evaluations reached``, after the continuation of
-    :func:`_choose_converged`): whether its parameters are shown to be at an optimum."""
+    :func:`~panto.identification.diagnosis.choice.choose_converged`): whether its parameters are
+    shown to be at an optimum."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -153,7 +154,7 @@ class Diagnosis:
     """When the verdict is ``unexplained``: the best term of the discovery library
     (:func:`~panto.identification.diagnosis.discovery.discover`) refitted in the nominal, with its
     withheld-data gain, as a hypothesis (the verdict stays ``unexplained``); or the
-    out-of-vocabulary term the accepted effects yielded to (:func:`_challenge`; its ``yielded``
+    out-of-vocabulary term the accepted effects yielded to (:func:`~panto.identification.diagnosis.challenge.challenge`; its ``yielded``
     says by how much); None otherwise or when no term gains on the withheld run."""
 
     def gap_closed(self) -> dict[str, float]:
@@ -257,11 +258,11 @@ class DiagnosisOptions:
     (:mod:`~panto.identification.diagnosis.discovery`)."""
     challenge: bool = True
     """When effects were accepted but a significant gap remains, challenge them with the
-    out-of-vocabulary mechanisms of the discovery library (:func:`challenger`: a play operator
+    out-of-vocabulary mechanisms of the discovery library (:func:`~panto.identification.diagnosis.challenge.challenger`: a play operator
     for hysteresis and backlash, kinks ``|s - c|`` for sign-blind sensors) refitted in the
     nominal: when the best of them gains more on the withheld run than the accepted effects do on
     any output, the verdict is ``unexplained`` with that term as the hypothesis
-    (:func:`_challenge`). Independent of :attr:`discovery` (which searches the whole library only
+    (:func:`~panto.identification.diagnosis.challenge.challenge`). Independent of :attr:`discovery` (which searches the whole library only
     after an ``unexplained`` verdict): switch both off for the fastest diagnosis."""
     workers: int | None = None
     """Worker processes for a round's candidate refits (:mod:`~panto.identification.diagnosis.
@@ -340,21 +341,21 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
                                               black_box_validation(adequacy, validation)), pool)
         remaining_gap = _gap(model, validation, current, roles) if steps else gap
         fit_after = fit_per_output(validation, current)
-        challenger = _challenge(nominal_model, train, validation, fit_before, fit_after,
+        challenger = challenge(nominal_model, train, validation, fit_before, fit_after,
                                 executor, progress, pool, options.max_evaluations) \
             if options.challenge and steps and gap["significant"] and \
-            remaining_gap["significant"] and _comparable(steps, say) and _converged(
+            remaining_gap["significant"] and comparable(steps, say) and challengeable(
                 adequacy or adequacy_quietly(nominal, result, train), say) else None
     withdrawn = accepted if challenger is not None else []
     if challenger is not None:  # the accepted effects yield to an out-of-vocabulary term
         model, current, steps, accepted, remaining_gap = nominal_model, before, [], [], gap
         fit_after = fit_per_output(validation, current)
-        rounds = _withdraw(rounds, withdrawn, challenger["yielded"])
+        rounds = withdraw(rounds, withdrawn, challenger["yielded"])
     analysis_after = _analyse(validation, current, model, roles) if steps else analysis_before
     verdict = "effect" if steps else ("unexplained" if gap["significant"] else "none")
     where = where_summary(analysis_before, validation)
     summary = (_summary(verdict, accepted, fit_before, fit_after, where, remaining_gap, gap)
-               if challenger is None else _yielded_summary(withdrawn, challenger, where)) + \
+               if challenger is None else yielded_summary(withdrawn, challenger, where)) + \
         "".join(f"; {s.effect} passed on the {s.evidence}, not on the fit sample by sample (the "
                 "free run of a head that leaves the wire may not be reproducible)"
                 for s in steps if s.evidence) + \
@@ -362,7 +363,7 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
                 "gains within the folds' standard error, training dBIC within 10: a run exciting "
                 "where they differ would tell)" for s in steps if s.alternatives) + \
         _training_only_text(_training_only(rounds, accepted))
-    hypothesis = challenger or (_discovery(model, train, validation, executor, progress,
+    hypothesis = challenger or (discovery_hypothesis(model, train, validation, executor, progress,
                                            adequacy or adequacy_quietly(nominal, result, train))
                                 if verdict == "unexplained" and options.discovery else None)
     if hypothesis is not None and hypothesis.get("term") is None:
@@ -433,8 +434,8 @@ def _search(model: Model, before: np.ndarray, candidates: Sequence[str], search:
             (", ".join(f"{c['effect']} (ERR {c['err']:.3f})" for c in ranking["top"]) or
              "no significant candidate"))
         trials = map_trials(try_candidate, model, ranking["top"], current, search, pool)
-        trials = _settle_ties(trials, ranking["top"], model, current, search)
-        trials, chosen = _choose_converged(
+        trials = choice.settle_ties(trials, ranking["top"], model, current, search)
+        trials, chosen = choice.choose_converged(
             trials + _between_runs(model, current, remaining, search), ranking["top"], model,
             current, search)
         rounds.append({"ranking": ranking["per_output"], "tried": [t[0].__dict__ for t in trials]})
@@ -443,7 +444,7 @@ def _search(model: Model, before: np.ndarray, candidates: Sequence[str], search:
             break
         trial, new_model, simulated = chosen
         passing = [t for t in trials if t[0].accepted]
-        alternatives = _alternatives(trial, passing, options.folds)
+        alternatives = choice.alternatives(trial, passing, options.folds)
         steps.append(dataclasses.replace(_step(trial, validation, current, simulated),
                                          alternatives=alternatives))
         accepted.append(trial.effect)
@@ -530,172 +531,6 @@ def _gap(model: Model, data: IdentificationData, simulated: np.ndarray,
     return {**gap, "transient_s": k * data.sample_period}
 
 
-def _discovery(model: Model, train: IdentificationData, validation: IdentificationData,
-               executor: Any, progress: Progress | None, adequacy: Any = None
-               ) -> dict[str, Any] | None:
-    """The discovery library's best term in the model (:attr:`DiagnosisOptions.discovery`); not
-    searched when a black box shows that the nominal itself did not converge (any term would
-    absorb that misfit: a false lead; measured on the independent families' held-out split, where
-    a stuck nominal 45 points short of the truth got a cubic term "closing 91 %" of its own gap)."""
-    from panto.identification.diagnosis.discovery import discover
-
-    if adequacy is not None and adequacy.verdict == "not converged":
-        why = (adequacy.message.split(": no nonlinear effect")[0] +
-               "; refit the nominal globally (--global-fit) before searching for a term")
-        if progress:
-            progress("diagnose: discovery not run: " + why)
-        return {"term": None, "summary": why, "adequacy": adequacy.to_dict()}
-    if progress:
-        progress("diagnose: unexplained: searching the discovery library for a term")
-    try:
-        hypothesis = discover(model.structure, model.parameters, model.free, train, validation,
-                              executor=executor, progress=indented(progress))
-    except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError) as error:
-        if progress:
-            progress(f"diagnose: discovery failed ({error})")
-        return None
-    if hypothesis is None:
-        return None
-    report = hypothesis.to_dict()
-    report.setdefault("summary", _hypothesis_text(report))
-    if progress:
-        progress("diagnose: hypothesis: " + report["summary"])
-    return report
-
-
-#: Term families of the discovery library no effect of the vocabulary represents: the play
-#: operator (hysteresis, backlash) and kinks ``|s - c|`` (a sign-blind sensor).
-CHALLENGERS = ("play", "abs")
-
-
-def challenger(term: Any, output: str) -> bool:
-    """Whether a discovery term may challenge the accepted effects on `output`: a play (hysteresis,
-    backlash) of an input or of the output's own simulation, a kink of the output's own
-    simulation (a sensor characteristic), as they are. Not a kink of an input (the vocabulary has
-    the input's static nonlinearities: dead zone, saturation; tuning split, cubic_stiffness/17:
-    ``|eta - c|`` beat the cubic's 6.6 points), not of another output (a path between outputs
-    the nominal lacks: held-out 830, a play of F_c on y_cb beat a true actuator lag), not delayed
-    or differentiated (a delayed output is a lag)."""
-    x = term.signals[0]
-    own = x.role == "output" and x.name == output
-    plain = len(term.signals) == 1 and not x.delay and not x.derivative
-    return plain and term.family in CHALLENGERS and (own or term.family == "play" and
-                                                     x.role == "input")
-
-
-#: The challenge's :class:`~panto.identification.diagnosis.discovery.DiscoveryOptions`: the
-#: :func:`challenger` terms, kinks ranked at every twentieth quantile, their level then chosen on
-#: a grid of 200 across the signal's range (a sensor's zero can lie anywhere in it).
-CHALLENGE = {"families": CHALLENGERS, "delays": (), "derivatives": False, "admit": challenger,
-             "kink_quantiles": tuple(k / 20 for k in range(1, 20)), "level_grid": 200}
-
-
-def _comparable(steps: Sequence[Step], say: Progress) -> bool:
-    """Whether the accepted effects' withheld gains can be compared with a challenger's: not
-    when one passed on other evidence than the sample-by-sample fit (a flying head's contact
-    loss on its force's distribution)."""
-    other = [s.effect for s in steps if s.evidence]
-    if other:
-        say(f"diagnose: the accepted effects are not challenged: {', '.join(other)} passed on "
-            "the withheld run's statistics, which a term's fit gain cannot be compared with")
-    return not other
-
-
-def _converged(adequacy: Any, say: Progress) -> bool:
-    """Whether the nominal may be challenged: not when a black box shows that it did not
-    converge (any term would absorb that misfit; :func:`_discovery` refuses it too)."""
-    if adequacy is not None and adequacy.verdict == "not converged":
-        say("diagnose: the accepted effects are not challenged: the nominal did not converge "
-            "(adequacy)")
-        return False
-    return True
-
-
-def _withdraw(rounds: Sequence[Mapping[str, Any]], withdrawn: Sequence[str], why: str
-              ) -> list[dict[str, Any]]:
-    """`rounds` with the trial each round accepted (``withdrawn[i]`` in round ``i``) marked
-    ``withdrawn`` with `why` (copies; the trials themselves are left alone)."""
-    out = []
-    for index, round_ in enumerate(rounds):
-        chosen = withdrawn[index] if index < len(withdrawn) else None
-        out.append({**round_, "tried": [
-            {**t, "withdrawn": why} if t.get("accepted") and t.get("effect") == chosen else t
-            for t in round_["tried"]]})
-    return out
-
-
-def _yielded_summary(withdrawn: Sequence[str], challenger: Mapping[str, Any],
-                     where: Mapping[str, Any]) -> str:
-    """The summary of a verdict the challenge turned: what was accepted, what it yielded to,
-    where the gap lies."""
-    return (f"{' then '.join(withdrawn)} passed the withheld tests but "
-            f"{challenger['yielded']}; the gap lies "
-            f"{where.get('text') or 'in the residual (no band or condition stands out)'}")
-
-
-def _challenge(nominal: Model, train: IdentificationData, validation: IdentificationData,
-               fit_before: Mapping[str, float], fit_after: Mapping[str, float], executor: Any,
-               progress: Progress | None, pool: Any = None,
-               max_evaluations: int | None = None) -> dict[str, Any] | None:
-    """The best out-of-vocabulary term (:func:`challenger`) refitted in the nominal, when it
-    gains more validation fit points on its output than the accepted effects gain on any output
-    (:attr:`DiagnosisOptions.challenge`); None otherwise. A hysteresis is not an actuator lag
-    because a lag closes part of its gap: the vocabulary's best is named only when nothing outside
-    it explains the withheld run better. Only outputs whose nominal validation fit leaves more
-    than the effects' gain are searched (no fit exceeds 100 %: elsewhere no term could win). The
-    single-term refits run side by side on `pool`, each
-    with `max_evaluations` simulations (the candidates' budget,
-    :attr:`DiagnosisOptions.max_evaluations`: the same competition; None: the discovery's)."""
-    from panto.identification.diagnosis.discovery import DiscoveryOptions, discover
-
-    gained = max(fit_after[o] - fit_before[o] for o in fit_before)
-    budget = {} if max_evaluations is None else {"max_evaluations": int(max_evaluations)}
-    # a fit cannot exceed 100 %: a term can beat the effects only where the nominal's
-    # validation fit leaves more than their gain
-    open_outputs = [o for o in fit_before if 100.0 - fit_before[o] > gained]
-    if progress:
-        progress(f"diagnose: a significant gap remains after the accepted effects (validation "
-                 f"+{gained:.2f} points at most): " + (
-                     f"challenging them with out-of-vocabulary terms on {', '.join(open_outputs)}"
-                     if open_outputs else "no output leaves a term room to gain more"))
-    if not open_outputs:
-        return None
-    try:
-        hypothesis = discover(nominal.structure, nominal.parameters, nominal.free, train,
-                              validation, options=DiscoveryOptions(**budget, **CHALLENGE),
-                              executor=executor, progress=indented(progress), pool=pool,
-                              outputs=open_outputs)
-    except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError,
-            BrokenExecutor, pickle.PicklingError) as error:  # an optional check: never fatal
-        if progress:
-            progress(f"diagnose: challenge failed ({error}); the accepted effects stand")
-        return None
-    if hypothesis is None or not hypothesis.gain > gained:
-        if progress:
-            progress("diagnose: the accepted effects stand" + (
-                "" if hypothesis is None else f" ({hypothesis.term} gains "
-                f"{hypothesis.gain:.2f} points on {hypothesis.output})"))
-        return None
-    report = hypothesis.to_dict()
-    report["summary"] = _hypothesis_text(report)
-    report["yielded"] = (
-        f"gained at most {gained:.2f} validation fit points on an output, and "
-        f"{hypothesis.term}, outside the vocabulary, gains {hypothesis.gain:.2f} on "
-        f"{hypothesis.output}: no effect of the vocabulary is named")
-    if progress:
-        progress("diagnose: the accepted effects " + report["yielded"])
-    return report
-
-
-def _hypothesis_text(report: Mapping[str, Any]) -> str:
-    before, after = report.get("fit_validation_before"), report.get("fit_validation_after")
-    fits = f"; validation fit {before:.2f} -> {after:.2f} %" \
-        if isinstance(before, (int, float)) and isinstance(after, (int, float)) else ""
-    closed = report.get("gap_closed")
-    share = f", {100 * closed:.0f} % of the gap closed" if isinstance(closed, (int, float)) else ""
-    return f"{report.get('term', '?')} on {report.get('output', '?')}{fits}{share}"
-
-
 def _predicted_contact_loss(top: Sequence[Mapping[str, Any]], remaining: Sequence[str],
                             roles: SignalRoles, validation: IdentificationData,
                             current: np.ndarray) -> list[dict[str, Any]]:
@@ -712,82 +547,6 @@ def _predicted_contact_loss(top: Sequence[Mapping[str, Any]], remaining: Sequenc
     return [{"effect": "contact_loss", "variant": "predicted F < 0", "err": 0.0,
              "significant": False, "output": force, "err_total": 0.0,
              "setting": {"output": force}}]
-
-
-def _choose(passing: Sequence[tuple[Trial, Model, np.ndarray]], folds: int
-            ) -> tuple[Trial, Model, np.ndarray]:
-    """The accepted candidate among those passing: the largest validation improvement, unless
-    others come within its standard error over the blocked folds (``spread / sqrt(folds)``);
-    the withheld data cannot tell those apart, so the training ``dBIC`` (which charges ``ln N_eff``
-    per parameter: parsimony) decides among them. A mass in the force-sensor path (one parameter)
-    and a compliant mode (three) can both improve a run excited below the mode; the simpler one
-    wins unless the mode is better on the withheld data beyond its uncertainty."""
-    best = max(passing, key=lambda t: t[0].improvement)[0]
-    close = [t for t in passing if t[0].improvement >= best.improvement - _tolerance(best, folds)]
-    return min(close, key=lambda t: t[0].delta_bic)
-
-
-def _choose_converged(trials: list, candidates: Sequence[Mapping[str, Any]], model: Model,
-                      current: np.ndarray, search: Search) -> tuple[list, tuple | None]:
-    """`trials` (the first ones refits of `candidates`, in order; any after them nothing to
-    refit) and :func:`_choose`'s choice among the passing ones (None when none passes), the
-    chosen refit continued first when it stopped on its budget
-    (:func:`~panto.identification.diagnosis.refit.continue_refit`; the trial in `trials`
-    replaced): the accepted effect's parameters, the next round's start and the gap it closes
-    are those of its optimum, not of where the budget ran out (the demo's contact loss and
-    friction both stopped on 400 simulations). A continued refit the withheld run no longer
-    supports is not chosen; the choice is made again among the others."""
-    trials = list(trials)
-    while True:
-        passing = [t for t in trials if t[0].accepted]
-        if not passing:
-            return trials, None
-        chosen = _choose(passing, search.options.folds)
-        index = next(i for i, t in enumerate(trials) if t is chosen)
-        if index >= len(candidates) or chosen[0].continued or not stopped_on_budget(chosen[0]):
-            return trials, chosen
-        continued = continue_refit(candidates[index], chosen, model, current, search)
-        if continued is chosen:  # the continuation failed or found nothing lower
-            return trials, chosen
-        trials[index] = continued
-
-
-def _tolerance(trial: Trial, folds: int) -> float:
-    """The standard error of `trial`'s withheld gain over the blocked folds
-    (``spread / sqrt(folds)``): gains closer than that to it the withheld run cannot tell apart."""
-    return trial.fold_spread / math.sqrt(max(folds, 1)) if math.isfinite(trial.fold_spread) \
-        else 0.0
-
-
-def _settle_ties(trials: list, candidates: Sequence[Mapping[str, Any]], model: Model,
-                 current: np.ndarray, search: Search) -> list:
-    """`trials` (one per candidate, in order) with the refits of the passing candidates the
-    withheld run cannot tell apart (:func:`_choose`'s tolerance) continued where they stopped on
-    their budget (:func:`~panto.identification.diagnosis.refit.continue_refit`): their training
-    ``dBIC`` then decides between optima, not between where two budgets ran out."""
-    passing = [t for t in trials if t[0].accepted]
-    if len(passing) < 2:
-        return trials
-    best = max(passing, key=lambda t: t[0].improvement)[0]
-    tolerance = _tolerance(best, search.options.folds)
-    close = {id(t[0]) for t in passing if t[0].improvement >= best.improvement - tolerance}
-    if len(close) < 2:
-        return trials
-    return [continue_refit(candidate, t, model, current, search) if id(t[0]) in close else t
-            for candidate, t in zip(candidates, trials)]
-
-
-def _alternatives(chosen: Trial, passing: Sequence[tuple[Trial, Model, np.ndarray]],
-                  folds: int) -> tuple[str, ...]:
-    """The other passing candidates the runs cannot tell from `chosen`: a withheld gain within
-    the chosen one's fold standard error (:func:`_choose`) and a training ``dBIC`` less than 10
-    away (Kass & Raftery 1995: below 10 the evidence for one over the other is not strong). A
-    lag much shorter than the excitation's periods acts like a delay: on such a run both are
-    named, the diagnosis' first (the lower ``dBIC``) and the other as equally supported."""
-    tolerance = _tolerance(chosen, folds)
-    return tuple(t.effect for t, _, _ in passing
-                 if t.effect != chosen.effect and t.improvement >= chosen.improvement - tolerance
-                 and abs(t.delta_bic - chosen.delta_bic) < -BIC_THRESHOLD)
 
 
 def _step(trial: Trial, data: IdentificationData, before: np.ndarray, after: np.ndarray) -> Step:

@@ -1,0 +1,194 @@
+"""Out-of-vocabulary terms against the diagnosis' verdict (step 5 of
+:func:`~panto.identification.diagnosis.pipeline.diagnose`, and the discovery after an
+``unexplained`` verdict).
+
+:func:`challenge`: when effects were accepted and a significant gap remains, the discovery
+library's :func:`challenger` terms (a play operator: hysteresis, backlash; a kink of the output's
+own simulation: a sign-blind sensor) are refitted in the nominal; when the best gains more on the
+withheld run than the accepted effects do on any output, they are withdrawn (:func:`withdraw`,
+:func:`yielded_summary`). :func:`discovery_hypothesis`: the whole library's best term after an
+``unexplained`` verdict, reported as a hypothesis.
+"""
+from __future__ import annotations
+
+import pickle
+from concurrent.futures import BrokenExecutor
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from panto.identification.diagnosis.nominal import Progress, indented
+from panto.identification.diagnosis.refit import Model
+from panto.identification.estimation.base import IdentificationData, IdentificationError
+
+
+def discovery_hypothesis(model: Model, train: IdentificationData, validation: IdentificationData,
+               executor: Any, progress: Progress | None, adequacy: Any = None
+               ) -> dict[str, Any] | None:
+    """The discovery library's best term in the model (:attr:`DiagnosisOptions.discovery`); not
+    searched when a black box shows that the nominal itself did not converge (any term would
+    absorb that misfit: a false lead; measured on the independent families' held-out split, where
+    a stuck nominal 45 points short of the truth got a cubic term "closing 91 %" of its own gap)."""
+    from panto.identification.diagnosis.discovery import discover
+
+    if adequacy is not None and adequacy.verdict == "not converged":
+        why = (adequacy.message.split(": no nonlinear effect")[0] +
+               "; refit the nominal globally (--global-fit) before searching for a term")
+        if progress:
+            progress("diagnose: discovery not run: " + why)
+        return {"term": None, "summary": why, "adequacy": adequacy.to_dict()}
+    if progress:
+        progress("diagnose: unexplained: searching the discovery library for a term")
+    try:
+        hypothesis = discover(model.structure, model.parameters, model.free, train, validation,
+                              executor=executor, progress=indented(progress))
+    except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError) as error:
+        if progress:
+            progress(f"diagnose: discovery failed ({error})")
+        return None
+    if hypothesis is None:
+        return None
+    report = hypothesis.to_dict()
+    report.setdefault("summary", hypothesis_text(report))
+    if progress:
+        progress("diagnose: hypothesis: " + report["summary"])
+    return report
+
+
+#: Term families of the discovery library no effect of the vocabulary represents: the play
+#: operator (hysteresis, backlash) and kinks ``|s - c|`` (a sign-blind sensor).
+CHALLENGERS = ("play", "abs")
+
+
+def challenger(term: Any, output: str) -> bool:
+    """Whether a discovery term may challenge the accepted effects on `output`: a play (hysteresis,
+    backlash) of an input or of the output's own simulation, a kink of the output's own
+    simulation (a sensor characteristic), as they are. Not a kink of an input (the vocabulary has
+    the input's static nonlinearities: dead zone, saturation; tuning split, cubic_stiffness/17:
+    ``|eta - c|`` beat the cubic's 6.6 points), not of another output (a path between outputs
+    the nominal lacks: held-out 830, a play of F_c on y_cb beat a true actuator lag), not delayed
+    or differentiated (a delayed output is a lag)."""
+    x = term.signals[0]
+    own = x.role == "output" and x.name == output
+    plain = len(term.signals) == 1 and not x.delay and not x.derivative
+    return plain and term.family in CHALLENGERS and (own or term.family == "play" and
+                                                     x.role == "input")
+
+
+#: The challenge's :class:`~panto.identification.diagnosis.discovery.DiscoveryOptions`: the
+#: :func:`challenger` terms, kinks ranked at every twentieth quantile, their level then chosen on
+#: a grid of 200 across the signal's range (a sensor's zero can lie anywhere in it).
+CHALLENGE = {"families": CHALLENGERS, "delays": (), "derivatives": False, "admit": challenger,
+             "kink_quantiles": tuple(k / 20 for k in range(1, 20)), "level_grid": 200}
+
+
+def comparable(steps: Sequence[Any], say: Progress) -> bool:
+    """Whether the accepted effects' (:class:`~panto.identification.diagnosis.pipeline.Step`)
+    withheld gains can be compared with a challenger's: not
+    when one passed on other evidence than the sample-by-sample fit (a flying head's contact
+    loss on its force's distribution)."""
+    other = [s.effect for s in steps if s.evidence]
+    if other:
+        say(f"diagnose: the accepted effects are not challenged: {', '.join(other)} passed on "
+            "the withheld run's statistics, which a term's fit gain cannot be compared with")
+    return not other
+
+
+def challengeable(adequacy: Any, say: Progress) -> bool:
+    """Whether the nominal may be challenged: not when a black box shows that it did not
+    converge (any term would absorb that misfit; :func:`discovery_hypothesis` refuses it too)."""
+    if adequacy is not None and adequacy.verdict == "not converged":
+        say("diagnose: the accepted effects are not challenged: the nominal did not converge "
+            "(adequacy)")
+        return False
+    return True
+
+
+def withdraw(rounds: Sequence[Mapping[str, Any]], withdrawn: Sequence[str], why: str
+              ) -> list[dict[str, Any]]:
+    """`rounds` with the trial each round accepted (``withdrawn[i]`` in round ``i``) marked
+    ``withdrawn`` with `why` (copies; the trials themselves are left alone)."""
+    out = []
+    for index, round_ in enumerate(rounds):
+        chosen = withdrawn[index] if index < len(withdrawn) else None
+        out.append({**round_, "tried": [
+            {**t, "withdrawn": why} if t.get("accepted") and t.get("effect") == chosen else t
+            for t in round_["tried"]]})
+    return out
+
+
+def yielded_summary(withdrawn: Sequence[str], winner: Mapping[str, Any],
+                    where: Mapping[str, Any]) -> str:
+    """The summary of a verdict the challenge turned: what was accepted, what it yielded to,
+    where the gap lies."""
+    return (f"{' then '.join(withdrawn)} passed the withheld tests but "
+            f"{winner['yielded']}; the gap lies "
+            f"{where.get('text') or 'in the residual (no band or condition stands out)'}")
+
+
+def challenge(nominal: Model, train: IdentificationData, validation: IdentificationData,
+               fit_before: Mapping[str, float], fit_after: Mapping[str, float], executor: Any,
+               progress: Progress | None, pool: Any = None,
+               max_evaluations: int | None = None) -> dict[str, Any] | None:
+    """The best out-of-vocabulary term (:func:`challenger`) refitted in the nominal, when it
+    gains more validation fit points on its output than the accepted effects gain on any output
+    (:attr:`DiagnosisOptions.challenge`); None otherwise. A hysteresis is not an actuator lag
+    because a lag closes part of its gap: the vocabulary's best is named only when nothing outside
+    it explains the withheld run better. Only outputs whose nominal validation fit leaves more
+    than the effects' gain are searched (no fit exceeds 100 %: elsewhere no term could win). The
+    single-term refits run side by side on `pool`, each
+    with `max_evaluations` simulations (the candidates' budget,
+    :attr:`DiagnosisOptions.max_evaluations`: the same competition; None: the discovery's)."""
+    from panto.identification.diagnosis.discovery import DiscoveryOptions, discover
+
+    gained = max(fit_after[o] - fit_before[o] for o in fit_before)
+    budget = {} if max_evaluations is None else {"max_evaluations": int(max_evaluations)}
+    # a fit cannot exceed 100 %: a term can beat the effects only where the nominal's
+    # validation fit leaves more than their gain
+    open_outputs = [o for o in fit_before if 100.0 - fit_before[o] > gained]
+    if progress:
+        progress(f"diagnose: a significant gap remains after the accepted effects (validation "
+                 f"+{gained:.2f} points at most): " + (
+                     f"challenging them with out-of-vocabulary terms on {', '.join(open_outputs)}"
+                     if open_outputs else "no output leaves a term room to gain more"))
+    if not open_outputs:
+        return None
+    try:
+        hypothesis = discover(nominal.structure, nominal.parameters, nominal.free, train,
+                              validation, options=DiscoveryOptions(**budget, **CHALLENGE),
+                              executor=executor, progress=indented(progress), pool=pool,
+                              outputs=open_outputs)
+    except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError,
+            BrokenExecutor, pickle.PicklingError) as error:  # an optional check: never fatal
+        if progress:
+            progress(f"diagnose: challenge failed ({error}); the accepted effects stand")
+        return None
+    if hypothesis is None or not hypothesis.gain > gained:
+        if progress:
+            progress("diagnose: the accepted effects stand" + (
+                "" if hypothesis is None else f" ({hypothesis.term} gains "
+                f"{hypothesis.gain:.2f} points on {hypothesis.output})"))
+        return None
+    report = hypothesis.to_dict()
+    report["summary"] = hypothesis_text(report)
+    report["yielded"] = (
+        f"gained at most {gained:.2f} validation fit points on an output, and "
+        f"{hypothesis.term}, outside the vocabulary, gains {hypothesis.gain:.2f} on "
+        f"{hypothesis.output}: no effect of the vocabulary is named")
+    if progress:
+        progress("diagnose: the accepted effects " + report["yielded"])
+    return report
+
+
+def hypothesis_text(report: Mapping[str, Any]) -> str:
+    """A hypothesis' report in one line: term, output, validation fits, share of the gap closed."""
+    before, after = report.get("fit_validation_before"), report.get("fit_validation_after")
+    fits = f"; validation fit {before:.2f} -> {after:.2f} %" \
+        if isinstance(before, (int, float)) and isinstance(after, (int, float)) else ""
+    closed = report.get("gap_closed")
+    share = f", {100 * closed:.0f} % of the gap closed" if isinstance(closed, (int, float)) else ""
+    return f"{report.get('term', '?')} on {report.get('output', '?')}{fits}{share}"
+
+
+__all__ = ["CHALLENGERS", "CHALLENGE", "challenger", "challenge", "challengeable", "comparable",
+           "discovery_hypothesis", "hypothesis_text", "withdraw", "yielded_summary"]
