@@ -18,17 +18,21 @@ import inspect
 import importlib.util
 import linecache
 import marshal
+import math
 import sys
 from dataclasses import dataclass
 from functools import cached_property, lru_cache
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import sympy as sp
-from scipy import linalg, optimize
 
-from panto.fmu_src.symbolic import (MechanicalModel, default_cache_dir, prune, read_verified,
-                                    source_digest, write_atomic)
+# SymPy and SciPy are imported where they are called: reading cached functions needs neither.
+from panto.fmu_src.disk_cache import (default_cache_dir, prune, read_verified, source_digest,
+                                      sympy_version, write_atomic)
+
+if TYPE_CHECKING:
+    from panto.fmu_src.symbolic import MechanicalModel
 
 
 class ModelEvaluationError(ValueError):
@@ -80,6 +84,8 @@ class LinearisedModel:
 
 def _as_lists(expression):
     """Matrices as nested lists (lambdify's math printer has no matrix type)."""
+    import sympy as sp  # only where functions are derived
+
     if isinstance(expression, sp.MatrixBase):
         return expression.tolist()
     if isinstance(expression, (list, tuple)):
@@ -91,6 +97,8 @@ def _cse_nested(expression):
     """``sympy.cse`` over every leaf of nested lists, keeping the nesting (lambdify's callable
     ``cse``). ``cse=True`` leaves nested lists (our matrices) without any elimination: the
     pantograph's forces then repeat ``sin(phi2 + phi3)`` 1688 times."""
+    import sympy as sp  # only where functions are derived
+
     leaves = []
 
     def collect(item):
@@ -121,6 +129,8 @@ def _digest_expression(expression, memo: dict) -> bytes:
     expressions alive), so the 35 000-node pantograph takes milliseconds where ``srepr`` takes
     half a second.
     """
+    import sympy as sp  # the expressions are SymPy's: already imported
+
     if expression is None:
         return b"None"
     key = id(expression)
@@ -142,7 +152,7 @@ def _digest_expression(expression, memo: dict) -> bytes:
 def _code_digest() -> bytes:
     """Hash of the code that turns a model into functions (this module and the derivatives)."""
     here = Path(__file__).resolve().parent
-    digest = hashlib.sha256(f"{_CACHE_FORMAT} {sp.__version__} {sys.version}".encode())
+    digest = hashlib.sha256(f"{_CACHE_FORMAT} {sympy_version()} {sys.version}".encode())
     digest.update(importlib.util.MAGIC_NUMBER)  # the bytecode format of the cached code
     for name in ("numeric.py", "symbolic.py"):
         digest.update((here / name).read_bytes())
@@ -174,8 +184,13 @@ def cache_key(model: MechanicalModel) -> str:
 
 @lru_cache(maxsize=1)
 def _namespace() -> dict:
-    """The globals lambdify gives a ``modules="math"`` function (math, its translations)."""
-    return dict(sp.lambdify((), 0.0, modules="math").__globals__)
+    """The globals lambdify gives a ``modules="math"`` function: ``from math import *``, SymPy's
+    translations of its names (``sympy.printing.pycode``) and the builtins lambdify adds; written
+    out so that cached functions run without importing SymPy."""
+    namespace = {name: getattr(math, name) for name in dir(math) if not name.startswith("_")}
+    namespace.update(ceiling=math.ceil, E=math.e, ln=math.log, Abs=abs, builtins=builtins,
+                     range=range)
+    return namespace
 
 
 def _code_objects(functions, filename: str):
@@ -303,6 +318,8 @@ class NumericModel:
 
     # --- compiled functions -----------------------------------------------------------------
     def _compile(self, expression) -> callable:
+        import sympy as sp  # only where functions are derived
+
         deps = [d.symbol for d in self.model.dependents]
         args = [self.model.p, self.model.q, self.model.v, self.model.u, deps]
         return sp.lambdify(args, _as_lists(expression), modules="math", cse=_cse_nested)
@@ -395,6 +412,8 @@ class NumericModel:
         r = np.array(f["forces"](p, q, v, u, deps), dtype=float).ravel()
         drdq, drdv, drdu = (np.array(a, dtype=float) for a in f["forces_jacobian"](p, q, v, u, deps))
         dmdq = np.array(f["mass_derivative"](p, q, v, u, deps), dtype=float)
+        from scipy import linalg  # here, not at module load: the cached paths need no SciPy
+
         lu = linalg.lu_factor(mass)
         acc = linalg.lu_solve(lu, r)
         correction = np.stack([dmdq[k] @ acc for k in range(n)], axis=1)
@@ -413,6 +432,8 @@ class NumericModel:
 
         For the pantograph: delta = 0, xi = eta, and phi1 such that the cross bar is at eta.
         """
+        import sympy as sp  # the model's expressions are SymPy's: already imported
+
         guess = self.model.extra.get("initial_guess", {})
         subs = dict(zip(self.model.p, p)) | dict(zip(self.model.u, u))
         q = np.array([float(sp.sympify(guess.get("values", {}).get(s.name, 0)).subs(subs))
@@ -434,6 +455,8 @@ class NumericModel:
         if (h_low - aim) * (h_high - aim) > 0:
             raise ModelEvaluationError(f"no configuration reaches the height {aim:g} m "
                                        f"(reachable: {h_low:g} m to {h_high:g} m)")
+        from scipy import optimize  # here, not at module load: the cached paths need no SciPy
+
         q[k] = optimize.brentq(lambda value: reach(value) - aim, low, high, xtol=1e-14)
         return q
 
@@ -478,6 +501,8 @@ class NumericModel:
         def jacobian(q):
             deps = self.dependents(p, q)
             return np.array(self._functions["forces_jacobian"](p, q, zeros, u, deps)[0], float)
+
+        from scipy import optimize  # here, not at module load: the cached paths need no SciPy
 
         sol = optimize.root(residual, np.asarray(q_guess, float), jac=jacobian, method="lm",
                             options={"xtol": 1e-14, "ftol": 1e-14})

@@ -16,18 +16,18 @@ which keeps the expressions small and the derivatives exact.
 """
 from __future__ import annotations
 
-import hashlib
-import os
 import pickle
-import sys
-import tempfile
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from functools import cached_property, lru_cache
+from functools import cached_property
 from pathlib import Path
 
 import sympy as sp
 
+# The cache helpers live apart (reading the cache needs no SymPy); imported here for
+# cached_derivation and for the modules that take them from here.
+from panto.fmu_src.disk_cache import (default_cache_dir, prune, read_verified, source_digest,
+                                      write_atomic)
 from panto.fmu_src.spec import ParameterSpec, Variable
 
 
@@ -199,73 +199,7 @@ def lagrangian_forces(
 
 # --- cache of derived models ------------------------------------------------------------------
 
-#: Environment variable naming the cache folder of derived and compiled models (default
-#: ``~/.cache/panto/numeric``).
-CACHE_VARIABLE = "PANTO_NUMERIC_CACHE"
 _DERIVED: dict[str, MechanicalModel] = {}
-
-
-def default_cache_dir() -> Path:
-    """``$PANTO_NUMERIC_CACHE`` or ``~/.cache/panto/numeric``."""
-    return Path(os.environ.get(CACHE_VARIABLE) or Path.home() / ".cache" / "panto" / "numeric")
-
-
-def read_verified(path: Path) -> bytes | None:
-    """Payload of a file written by :func:`write_atomic`; None if missing or corrupted.
-
-    The file is the SHA-256 of the payload followed by the payload.
-    """
-    try:
-        data = path.read_bytes()
-    except OSError:
-        return None
-    return data[32:] if len(data) > 32 and hashlib.sha256(data[32:]).digest() == data[:32] else None
-
-
-def write_atomic(path: Path, payload: bytes) -> bool:
-    """Write ``sha256(payload) + payload`` via a temporary file and a rename.
-
-    Parallel processes (pytest-xdist workers) never see half a file. Returns False, leaving no
-    file, if the folder is not writable.
-    """
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        handle, scratch = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-    except OSError:
-        return False
-    try:
-        with os.fdopen(handle, "wb") as stream:
-            stream.write(hashlib.sha256(payload).digest() + payload)
-        os.chmod(scratch, 0o644)
-        os.replace(scratch, path)
-        return True
-    except OSError:
-        return False
-    finally:
-        if os.path.exists(scratch):
-            os.unlink(scratch)
-
-
-def prune(folder: Path, pattern: str, keep: int = 4) -> None:
-    """Delete all but the ``keep`` newest files matching ``pattern`` (stale source versions).
-
-    A compiled pantograph is 13 MB and every edit of the model sources makes a new one.
-    """
-    try:
-        files = sorted(folder.glob(pattern), key=lambda f: f.stat().st_mtime, reverse=True)
-        for stale in files[keep:]:
-            stale.unlink(missing_ok=True)
-    except OSError:  # another process pruned it first
-        pass
-
-
-@lru_cache(maxsize=1)
-def source_digest() -> str:
-    """Hash of the model sources (every ``fmu_src/*.py``), SymPy's and Python's versions."""
-    digest = hashlib.sha256(f"{sp.__version__} {sys.version}".encode())
-    for path in sorted(Path(__file__).resolve().parent.glob("*.py")):
-        digest.update(path.name.encode() + path.read_bytes())
-    return digest.hexdigest()[:24]
 
 
 def cached_derivation(name: str, derive: Callable[[], MechanicalModel],

@@ -15,14 +15,16 @@ uses numpy, and the matrix exponential is computed here, because scipy's threade
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from functools import lru_cache
 from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
-from scipy import optimize
 
+from panto.fmu_src.parameters import ParameterSet
+from panto.fmu_src.spec import ParameterSpec
 from panto.identification.estimation.base import IdentificationError
 from panto.identification.structures import static_kernel
 
@@ -37,7 +39,9 @@ def static_functions() -> dict[str, Callable]:
     ``balance(p, q, u, deps) -> (r, dr/dq)`` and ``linear(p, q, u, deps) -> (M, dr/dv, dr/du,
     h, dh/dq, dh/dv, dh/du)``, all at ``v = 0``, and ``static_parameters``: the indices into
     ``p`` of the parameters the equilibrium depends on (those in ``r``, ``dr/dq``, the linkage
-    and ``y_cb`` at rest; not the dampings).
+    and ``y_cb`` at rest; not the dampings); with them, the model's constants a run needs
+    (``parameter_specs``: the fields of every :class:`~panto.fmu_src.spec.ParameterSpec`;
+    ``phi1_search_range`` [rad]), so that a process reading the cache never imports SymPy.
     """
     return load_static_functions()[0]
 
@@ -58,7 +62,7 @@ def load_static_functions(cache_dir: str | Path | None = None) -> tuple[dict[str
     file is derived again (and replaced where the folder is writable).
     """
     from panto.fmu_src import numeric
-    from panto.fmu_src.symbolic import default_cache_dir
+    from panto.fmu_src.disk_cache import default_cache_dir
 
     folder = default_cache_dir() if cache_dir is None else Path(cache_dir)
     return numeric.cached_functions(folder, CACHE_STEM, numeric.source_cache_key(Path(__file__)),
@@ -69,7 +73,7 @@ def derive_static_functions() -> dict[str, Callable]:
     """The functions of :func:`static_functions`, derived and compiled in this process."""
     import sympy as sp
 
-    from panto.fmu_src.pantograph import derive_pantograph
+    from panto.fmu_src.pantograph import PHI1_SEARCH_RANGE, derive_pantograph
 
     model = derive_pantograph()
     rest = {v: 0 for v in model.v}
@@ -94,6 +98,8 @@ def derive_static_functions() -> dict[str, Callable]:
         model.extra["y_cb"])))
     return {
         "static_parameters": tuple(i for i, s in enumerate(model.p) if s in statics),
+        "parameter_specs": tuple(dataclasses.astuple(spec) for spec in model.parameters),
+        "phi1_search_range": tuple(float(value) for value in PHI1_SEARCH_RANGE),
         "phi2": phi2, "phi3": phi3,
         "reach": compile_(model.guards[0].expression, model.p, model.q),
         "height": compile_(model.extra["y_cb"], model.p, model.q, deps),
@@ -191,10 +197,10 @@ def _norm(r: np.ndarray) -> float:
 
 def initial_guess(p: np.ndarray, u: Sequence[float]) -> np.ndarray:
     """Cross bar at the wire height (bisection on phi1), ``delta = 0``, head on the wire."""
-    from panto.fmu_src.pantograph import PHI1_SEARCH_RANGE
+    from scipy import optimize  # here, not at module load: a cached balance needs no SciPy
 
     f, kernel = static_functions(), compiled()
-    low, high = PHI1_SEARCH_RANGE
+    low, high = f["phi1_search_range"]
     grid = np.linspace(low, high, 136)
     reach = None if kernel is None else kernel.reach_grid(p, [0.0, 0.0, u[0]], grid)
     ok = ([phi for phi in grid if f["reach"](p, [phi, 0.0, u[0]]) >= 0.0] if reach is None
@@ -263,10 +269,18 @@ def _equilibrium(p: np.ndarray, u0: Sequence[float], start: np.ndarray | None
 
 
 @lru_cache(maxsize=1)
-def parameter_defaults() -> tuple[tuple[str, ...], np.ndarray]:
-    from panto.fmu_src.models import default_parameters
+def default_parameter_set() -> ParameterSet:
+    """The pantograph's default parameters (units, bounds, provenance), those of
+    :func:`panto.fmu_src.models.default_parameters`, rebuilt from :func:`static_functions`
+    (no SymPy)."""
+    specs = tuple(ParameterSpec(*fields) for fields in static_functions()["parameter_specs"])
+    return ParameterSet("Pantograph", specs)
 
-    params = default_parameters("Pantograph")
+
+@lru_cache(maxsize=1)
+def parameter_defaults() -> tuple[tuple[str, ...], np.ndarray]:
+    """Names and values of the pantograph's default parameters (:func:`default_parameter_set`)."""
+    params = default_parameter_set()
     return params.names, params.vector()
 
 
@@ -315,13 +329,13 @@ def propagate(phi: np.ndarray, drive: np.ndarray, x0: np.ndarray) -> np.ndarray:
     """States of ``x[k+1] = Phi x[k] + drive[k]`` from ``x0``, shape ``(len(drive) + 1, n)``.
 
     In modal coordinates ``z = V^-1 x`` every mode is the first-order filter
-    ``z[k+1] = lambda z[k] + g[k]`` (:func:`scipy.signal.lfilter`); a complex pair is run once
+    ``z[k+1] = lambda z[k] + g[k]`` (compiled:
+    :func:`~panto.identification.structures.static_kernel.first_order_filter`; else
+    :func:`scipy.signal.lfilter`: the same values); a complex pair is run once
     and counted twice (``x = sum 2 Re(v z)``). Only real matrix products are used (a complex
     product of this size is slow under a threaded BLAS on a loaded machine). Falls back to the
     plain recursion when the eigenvectors are ill conditioned.
     """
-    from scipy import signal
-
     eigenvalues, vectors = np.linalg.eig(phi)
     if np.linalg.cond(vectors) > 1e8:
         states = np.empty((len(drive) + 1, len(x0)))
@@ -336,12 +350,21 @@ def propagate(phi: np.ndarray, drive: np.ndarray, x0: np.ndarray) -> np.ndarray:
     for i, lam in enumerate(eigenvalues):
         if lam.imag < 0.0:
             continue  # the conjugate of a pair counted twice below
-        z = np.empty(len(drive) + 1, complex)
-        z[0] = z0[i]
-        z[1:], _ = signal.lfilter([1.0], [1.0, -lam], modal_drive[:, i], zi=[lam * z0[i]])
+        z = static_kernel.first_order_filter(lam, modal_drive[:, i], z0[i])
+        if z is None:
+            z = _lfilter(lam, modal_drive[:, i], z0[i])
         weight = 2.0 if lam.imag > 0.0 else 1.0
         states += weight * (np.outer(z.real, vectors[:, i].real)
                             - np.outer(z.imag, vectors[:, i].imag))
     return states
 
 
+def _lfilter(lam: complex, drive: np.ndarray, z0: complex) -> np.ndarray:
+    """:func:`~panto.identification.structures.static_kernel.first_order_filter` by
+    :func:`scipy.signal.lfilter` (no compiler, or ``PANTO_STATIC_KERNEL=0``)."""
+    from scipy import signal  # here only: importing scipy.signal takes 0.3 s
+
+    z = np.empty(len(drive) + 1, complex)
+    z[0] = z0
+    z[1:], _ = signal.lfilter([1.0], [1.0, -lam], drive, zi=[lam * z0])
+    return z

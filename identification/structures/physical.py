@@ -54,6 +54,7 @@ from panto.identification.estimation.base import (IdentificationData, Identifica
                                  ModelStructure)
 from panto.identification.data.datasets import delay_signal
 from panto.identification.structures.linearisation import (INDEX as _INDEX, discretise, linearise,
+                                          default_parameter_set as _default_parameter_set,
                                           parameter_defaults as _parameter_defaults, propagate,
                                           solve_equilibrium, static_functions)
 
@@ -110,11 +111,10 @@ class _PhysicalBase(ModelStructure):
         if bad:
             raise IdentificationError(f"{self.name}: unknown model parameter(s) {bad}; the "
                                       f"pantograph has {list(names)}")
-        from panto.fmu_src.models import default_parameters
         from panto.fmu_src.parameters import ParameterError
 
         try:
-            default_parameters("Pantograph").with_values(fixed)
+            _default_parameter_set().with_values(fixed)
         except ParameterError as error:
             raise IdentificationError(f"{self.name}: fixed values: {error}") from None
         self.output_names = tuple(outputs)
@@ -138,9 +138,7 @@ class _PhysicalBase(ModelStructure):
     def units(self) -> dict[str, str]:
         """Unit of every parameter: the Pantograph parameter set's (thesis Table 4.1); ``eta_delay``
         in s."""
-        from panto.fmu_src.models import default_parameters
-
-        specs = default_parameters("Pantograph")
+        specs = _default_parameter_set()
         return {n: "s" if n == DELAY else specs.spec(n).unit for n in self.parameter_names}
 
     def parameter_vector(self, parameters: Mapping[str, float]) -> np.ndarray:

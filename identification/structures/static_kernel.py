@@ -19,6 +19,11 @@ library is built at first use by
 :mod:`panto.fmu_src.c_kernels` into the kernel cache (keyed by the hash of the generated source);
 without a compiler, or with ``PANTO_STATIC_KERNEL=0`` (:data:`SWITCH_VARIABLE`), the Python
 functions run.
+
+The first-order filter of every mode in
+:func:`~panto.identification.structures.linearisation.propagate` is compiled here too
+(:func:`first_order_filter`: the operations of :func:`scipy.signal.lfilter`, so its results bit
+for bit, without importing ``scipy.signal``, which takes 0.3 s).
 """
 from __future__ import annotations
 
@@ -27,12 +32,13 @@ import ctypes
 import hashlib
 import inspect
 import sys
+from functools import lru_cache
 from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
 
-from panto.fmu_src import c_kernels, symbolic
+from panto.fmu_src import c_kernels, disk_cache
 
 #: Flags of the build: ISO C, no fused multiply-adds, libm calls kept as written.
 COMPILER_FLAGS = ("-std=c99", "-O2", "-ffp-contract=off", "-fno-builtin")
@@ -195,7 +201,7 @@ def kernel_source(functions: dict[str, Callable], sizes: Sequence[int], *,
     first coordinate set to each of the `n` values ``phi1`` (2 where one is not finite).
 
     The translation takes 0.1-0.2 s, so it is kept in `cache_dir` (default
-    :func:`panto.fmu_src.symbolic.default_cache_dir`; ``False``: neither read nor written) under
+    :func:`panto.fmu_src.disk_cache.default_cache_dir`; ``False``: neither read nor written) under
     a hash of the functions' sources, `sizes`, this module and Python's version, checked by its
     SHA-256; a missing or corrupted file is translated again.
     """
@@ -206,17 +212,17 @@ def kernel_source(functions: dict[str, Callable], sizes: Sequence[int], *,
                             + Path(__file__).read_bytes())
     for key, text in sources.items():
         digest.update(f"\0{key}\0{text}".encode())
-    folder = symbolic.default_cache_dir() if cache_dir is None else Path(cache_dir)
+    folder = disk_cache.default_cache_dir() if cache_dir is None else Path(cache_dir)
     path = folder / f"{SOURCE_CACHE_STEM}-{digest.hexdigest()[:24]}.c"
-    stored = symbolic.read_verified(path)
+    stored = disk_cache.read_verified(path)
     try:
         if stored is not None:
             return stored.decode()
     except UnicodeDecodeError:  # not a translation: made again
         pass
     source = _translate(sources, sizes)
-    if symbolic.write_atomic(path, source.encode()):
-        symbolic.prune(folder, f"{SOURCE_CACHE_STEM}-*.c")
+    if disk_cache.write_atomic(path, source.encode()):
+        disk_cache.prune(folder, f"{SOURCE_CACHE_STEM}-*.c")
     return source
 
 
@@ -350,5 +356,60 @@ def switched_on() -> bool:
     return BUILD.enabled()
 
 
+# --- the modal filter of linearisation.propagate ----------------------------------------------
+
+#: ``z[k+1] = lambda z[k] + g[k]`` for complex ``z``, ``g`` (interleaved real and imaginary parts):
+#: the operations of ``scipy.signal.lfilter([1], [1, -lambda], g, zi=[lambda z[0]])`` in its order,
+#: real part ``(lr zr - li zi) + gr``, imaginary part ``(lr zi + li zr) + gi`` (lfilter's products
+#: by ``b = [1, 0]`` and its negations are exact).
+FILTER_SOURCE = """
+void panto_first_order_filter(long n, double lr, double li, const double *g, double *z) {
+    double zr = z[0], zi = z[1];
+    for (long k = 0; k < n; ++k) {
+        double real = (lr * zr - li * zi) + g[2 * k];
+        double imag = (lr * zi + li * zr) + g[2 * k + 1];
+        zr = real;
+        zi = imag;
+        z[2 * k + 2] = zr;
+        z[2 * k + 3] = zi;
+    }
+}
+"""
+
+
+def _bind_filter(library: ctypes.CDLL):
+    function = library.panto_first_order_filter
+    function.restype = None
+    function.argtypes = [ctypes.c_long, ctypes.c_double, ctypes.c_double, ctypes.c_void_p,
+                         ctypes.c_void_p]
+    return function
+
+
+#: The library of :data:`FILTER_SOURCE` (same flags and switch as the balance).
+FILTER = c_kernels.Kernel("first_order_filter", SWITCH_VARIABLE, COMPILER_FLAGS, FILTER_SOURCE,
+                          _bind_filter)
+
+
+@lru_cache(maxsize=1)
+def _filter_function():
+    return FILTER.load()
+
+
+def first_order_filter(lam: complex, drive: np.ndarray, z0: complex) -> np.ndarray | None:
+    """``z`` with ``z[0] = z0`` and ``z[k+1] = lam z[k] + drive[k]`` (complex, length
+    ``len(drive) + 1``), bit for bit ``scipy.signal.lfilter([1], [1, -lam], drive,
+    zi=[lam z0])`` after ``z0``; None without a compiler or with ``PANTO_STATIC_KERNEL=0``
+    (the caller runs lfilter)."""
+    function = _filter_function() if switched_on() else None
+    if function is None:
+        return None
+    g = np.ascontiguousarray(drive, dtype=complex)
+    z = np.empty(len(g) + 1, dtype=complex)
+    z[0] = z0
+    function(len(g), float(lam.real), float(lam.imag), g.ctypes.data, z.ctypes.data)
+    return z
+
+
 __all__ = ["COMPILER_FLAGS", "SWITCH_VARIABLE", "FUNCTIONS", "SOURCE_CACHE_STEM", "Untranslatable",
-           "python_to_c", "kernel_source", "StaticKernel", "load", "switched_on", "BUILD"]
+           "python_to_c", "kernel_source", "StaticKernel", "load", "switched_on", "BUILD",
+           "FILTER_SOURCE", "FILTER", "first_order_filter"]
