@@ -98,3 +98,35 @@ def test_the_report_says_when_an_accepted_refit_did_not_converge():
     assert "maximum of 1200 model evaluations" in _not_converged(step)
     assert _not_converged(Step("actuator_lag", "lag", {}, {}, {}, {}, {}, {}, {},
                                refit="converged: the gradient vanishes")) == ""
+
+
+def test_a_rejected_refit_that_stopped_on_its_budget_with_a_withheld_gain_is_continued(stopped):
+    """Its significance and dBIC were taken where the budget ran out: continued, it is judged at
+    its optimum (here the lag the plant has, accepted)."""
+    import dataclasses
+
+    from panto.identification.diagnosis.choice import settle_ties
+
+    candidate, entry, model, current, search = stopped
+    assert entry[0].improvement > 0.0
+    rejected = (dataclasses.replace(entry[0], accepted=False, failed=("stopped short",)),) + \
+        tuple(entry[1:])
+    [settled] = settle_ties([rejected], [candidate], model, current, search)
+    assert settled is not rejected and settled[0].continued and settled[0].accepted
+    assert _cost(settled, search) < _cost(rejected, search)
+    assert settled[1].parameters["actuator_lag:u"] == pytest.approx(LAG, rel=0.05)
+
+
+def test_rejected_refits_without_a_withheld_gain_or_converged_are_left_alone(stopped):
+    import dataclasses
+
+    from panto.identification.diagnosis.choice import settle_ties
+
+    candidate, entry, model, current, search = stopped
+    no_gain = (dataclasses.replace(entry[0], accepted=False, improvement=-0.5),) + \
+        tuple(entry[1:])
+    assert settle_ties([no_gain], [candidate], model, current, search)[0] is no_gain
+    converged = (dataclasses.replace(entry[0], accepted=False,
+                                     message="converged: the gradient vanishes"),) + \
+        tuple(entry[1:])
+    assert settle_ties([converged], [candidate], model, current, search)[0] is converged
