@@ -22,13 +22,15 @@ from panto.identification.diagnosis.refit import Model
 from panto.identification.estimation.base import IdentificationData, IdentificationError
 
 
-def discovery_hypothesis(model: Model, train: IdentificationData, validation: IdentificationData,
-               executor: Any, progress: Progress | None, adequacy: Any = None
-               ) -> dict[str, Any] | None:
-    """The discovery library's best term in the model (:attr:`DiagnosisOptions.discovery`); not
-    searched when a black box shows that the nominal itself did not converge (any term would
-    absorb that misfit: a false lead; measured on the independent families' held-out split, where
-    a stuck nominal 45 points short of the truth got a cubic term "closing 91 %" of its own gap)."""
+def discovery_hypothesis(model: Model, train: IdentificationData,
+                         validation: IdentificationData, executor: Any,
+                         progress: Progress | None, adequacy: Any = None
+                         ) -> dict[str, Any] | None:
+    """The discovery library's best term in the model
+    (:attr:`~panto.identification.diagnosis.pipeline.DiagnosisOptions.discovery`); not searched
+    when a black box shows that the nominal itself did not converge (any term would absorb that
+    misfit: a false lead; measured on the independent families' held-out split, where a stuck
+    nominal 45 points short of the truth got a cubic term "closing 91 %" of its own gap)."""
     from panto.identification.diagnosis.discovery import discover
 
     if adequacy is not None and adequacy.verdict == "not converged":
@@ -127,18 +129,19 @@ def yielded_summary(withdrawn: Sequence[str], winner: Mapping[str, Any],
 
 
 def challenge(nominal: Model, train: IdentificationData, validation: IdentificationData,
-               fit_before: Mapping[str, float], fit_after: Mapping[str, float], executor: Any,
-               progress: Progress | None, pool: Any = None,
-               max_evaluations: int | None = None) -> dict[str, Any] | None:
-    """The best out-of-vocabulary term (:func:`challenger`) refitted in the nominal, when it
-    gains more validation fit points on its output than the accepted effects gain on any output
-    (:attr:`DiagnosisOptions.challenge`); None otherwise. A hysteresis is not an actuator lag
-    because a lag closes part of its gap: the vocabulary's best is named only when nothing outside
-    it explains the withheld run better. Only outputs whose nominal validation fit leaves more
-    than the effects' gain are searched (no fit exceeds 100 %: elsewhere no term could win). The
-    single-term refits run side by side on `pool`, each
-    with `max_evaluations` simulations (the candidates' budget,
-    :attr:`DiagnosisOptions.max_evaluations`: the same competition; None: the discovery's)."""
+              fit_before: Mapping[str, float], fit_after: Mapping[str, float], executor: Any,
+              progress: Progress | None, pool: Any = None,
+              max_evaluations: int | None = None) -> dict[str, Any] | None:
+    """The best out-of-vocabulary term (:func:`challenger`) refitted in the nominal, when it gains
+    more validation fit points on its output than the accepted effects gain on any output
+    (:attr:`~panto.identification.diagnosis.pipeline.DiagnosisOptions.challenge`); None otherwise.
+    A hysteresis is not an actuator lag because a lag closes part of its gap: the vocabulary's best
+    is named only when nothing outside it explains the withheld run better. Only outputs whose
+    nominal validation fit leaves more than the effects' gain are searched (no fit exceeds 100 %:
+    elsewhere no term could win). The single-term refits run side by side on `pool`, each with
+    `max_evaluations` simulations (the candidates' budget,
+    :attr:`~panto.identification.diagnosis.pipeline.DiagnosisOptions.max_evaluations`: the same
+    competition; None: the discovery's)."""
     from panto.identification.diagnosis.discovery import DiscoveryOptions, discover
 
     gained = max(fit_after[o] - fit_before[o] for o in fit_before)

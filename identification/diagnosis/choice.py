@@ -2,11 +2,10 @@
 :func:`~panto.identification.diagnosis.pipeline.diagnose`).
 
 The largest withheld gain wins unless others come within its standard error over the blocked
-folds (:func:`tolerance`); the training ``dBIC`` decides among those (:func:`choose`), after their
-refits stopped on their budget were continued to their optima, and those of rejected candidates
-whose withheld gain reaches theirs (:func:`settle_ties`); the chosen
-refit itself is continued when it stopped on its budget (:func:`choose_converged`); the others
-the runs cannot tell from it are named beside it (:func:`alternatives`).
+folds (:func:`tolerance`); the training ``dBIC`` decides among those (:func:`choose`), after the
+refits that could be chosen were continued to their optima where they stopped on their budget
+(:func:`choose_converged`); the others the runs cannot tell from the chosen one are named beside
+it (:func:`alternatives`).
 """
 from __future__ import annotations
 
@@ -34,28 +33,51 @@ def choose(passing: Sequence[tuple[Trial, Model, np.ndarray]], folds: int
 
 
 def choose_converged(trials: list, candidates: Sequence[Mapping[str, Any]], model: Model,
-                      current: np.ndarray, search: Search) -> tuple[list, tuple | None]:
-    """`trials` (the first ones refits of `candidates`, in order; any after them nothing to
-    refit) and :func:`choose`'s choice among the passing ones (None when none passes), the
-    chosen refit continued first when it stopped on its budget
-    (:func:`~panto.identification.diagnosis.refit.continue_refit`; the trial in `trials`
-    replaced): the accepted effect's parameters, the next round's start and the gap it closes
-    are those of its optimum, not of where the budget ran out (the demo's contact loss and
-    friction both stopped on 400 simulations). A continued refit the withheld run no longer
-    supports is not chosen; the choice is made again among the others."""
-    trials = list(trials)
+                     current: np.ndarray, search: Search) -> tuple[list, tuple | None]:
+    """`trials` (the first ones refits of `candidates`, in order; any after them, the offset
+    between the runs, nothing to refit) with the contenders' refits continued, and
+    :func:`choose`'s choice among the passing ones (None when none passes).
+
+    A contender is a trial whose refit stopped on its budget and that could be chosen at its
+    optimum: a passing one whose withheld gain is within :func:`tolerance` of the best passing
+    gain (the training ``dBIC`` then decides between optima, not between where two budgets ran
+    out: held-out three-mass/actuator_lag/1250), or a rejected one that gains as much and whose
+    rejection is the training side's (``dBIC`` or ``|theta|/sigma``, taken where its budget ran
+    out; when none passes, a gain above its own fold standard error); the demo's bellow lag, the
+    round's largest withheld gain, was rejected for ``|theta|/sigma`` 2.5 after 400 simulations
+    with the contact recursion in NumPy and passed at 4.6 with the compiled one. Each is continued
+    once (:func:`~panto.identification.diagnosis.refit.continue_refit`: three times the budget)
+    and judged again, until no contender is left; so the chosen effect's parameters, the next
+    round's start and the gap it closes are those of its optimum (the demo's contact loss and
+    friction both stopped on 400 simulations), and a refit the withheld run no longer supports
+    at its optimum is not chosen."""
+    trials, folds = list(trials), search.options.folds
     while True:
         passing = [t for t in trials if t[0].accepted]
-        if not passing:
-            return trials, None
-        chosen = choose(passing, search.options.folds)
-        index = next(i for i, t in enumerate(trials) if t is chosen)
-        if index >= len(candidates) or chosen[0].continued or not stopped_on_budget(chosen[0]):
-            return trials, chosen
-        continued = continue_refit(candidates[index], chosen, model, current, search)
-        if continued is chosen:  # the continuation failed or found nothing lower
-            return trials, chosen
-        trials[index] = continued
+        best = max(passing, key=lambda t: t[0].improvement)[0] if passing else None
+        floor = best.improvement - tolerance(best, folds) if best is not None else -math.inf
+        due = [i for i, (trial, _, _) in enumerate(trials[:len(candidates)])
+               if stopped_on_budget(trial) and not trial.continuation and
+               _contends(trial, floor, folds)]
+        if not due:
+            return trials, (choose(passing, folds) if passing else None)
+        for i in due:
+            trials[i] = continue_refit(candidates[i], trials[i], model, current, search)
+
+
+#: The training-side rejections a refit stopped on its budget may owe to where the budget ran
+#: out (:func:`~panto.identification.diagnosis.support.judge_trial`'s reasons).
+TRAINING_SIDE = ("dBIC ", "|theta|/sigma ")
+
+
+def _contends(trial: Trial, floor: float, folds: int) -> bool:
+    """Whether `trial` could be chosen at its optimum (:func:`choose_converged`)."""
+    if not math.isfinite(trial.improvement) or trial.improvement < floor:
+        return False
+    if trial.accepted:
+        return True
+    return (trial.improvement > tolerance(trial, folds) and bool(trial.failed) and
+            all(reason.startswith(TRAINING_SIDE) for reason in trial.failed))
 
 
 def tolerance(trial: Trial, folds: int) -> float:
@@ -63,37 +85,6 @@ def tolerance(trial: Trial, folds: int) -> float:
     (``spread / sqrt(folds)``): gains closer than that to it the withheld run cannot tell apart."""
     return trial.fold_spread / math.sqrt(max(folds, 1)) if math.isfinite(trial.fold_spread) \
         else 0.0
-
-
-def settle_ties(trials: list, candidates: Sequence[Mapping[str, Any]], model: Model,
-                current: np.ndarray, search: Search) -> list:
-    """`trials` (one per candidate, in order) with the contenders' refits continued where they
-    stopped on their budget (:func:`~panto.identification.diagnosis.refit.continue_refit`) and
-    judged again: the passing candidates the withheld run cannot tell apart (:func:`choose`'s
-    tolerance), whose training ``dBIC`` then decides between optima, not between where two
-    budgets ran out; and a rejected candidate whose refit stopped on its budget while its
-    withheld gain already reaches theirs (at least the best passing gain less that tolerance;
-    when none passes, above its own fold standard error): its significance and ``dBIC`` were
-    taken where its budget ran out. (The demo's bellow lag, the round's largest withheld gain,
-    was rejected for ``|theta|/sigma`` 2.5 after 400 simulations with the contact recursion in
-    NumPy and accepted at 4.6 with the compiled one: where the budget ran out decided.)"""
-    folds = search.options.folds
-    passing = [t[0] for t in trials if t[0].accepted]
-    best = max(passing, key=lambda t: t.improvement) if passing else None
-    floor = best.improvement - tolerance(best, folds) if best is not None else -math.inf
-
-    def contender(trial: Trial) -> bool:
-        if trial.accepted:
-            return trial.improvement >= floor
-        return (stopped_on_budget(trial) and math.isfinite(trial.improvement)
-                and trial.improvement >= floor and trial.improvement > tolerance(trial, folds))
-
-    close = [t[0] for t in trials if contender(t[0])]
-    if len(close) < 2 and all(t.accepted for t in close):
-        return trials  # one passing candidate alone: choose_converged continues it if chosen
-    continued = {id(t) for t in close}
-    return [continue_refit(candidate, t, model, current, search) if id(t[0]) in continued
-            else t for candidate, t in zip(candidates, trials)]
 
 
 def alternatives(chosen: Trial, passing: Sequence[tuple[Trial, Model, np.ndarray]],
@@ -109,4 +100,4 @@ def alternatives(chosen: Trial, passing: Sequence[tuple[Trial, Model, np.ndarray
                  and abs(t.delta_bic - chosen.delta_bic) < -BIC_THRESHOLD)
 
 
-__all__ = ["choose", "choose_converged", "tolerance", "settle_ties", "alternatives"]
+__all__ = ["choose", "choose_converged", "tolerance", "alternatives", "TRAINING_SIDE"]

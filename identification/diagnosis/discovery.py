@@ -56,7 +56,7 @@ from sklearn.linear_model import LassoLarsIC, lars_path, orthogonal_mp
 from panto.identification.diagnosis.parallel import map_replayed
 from panto.identification.estimation.base import (IdentificationData, IdentificationError,
                                                   ModelStructure, fit_percent)
-from panto.identification.diagnosis.refit import CONTINUATION_FACTOR
+from panto.identification.diagnosis.refit import CONTINUATION_FACTOR, stopped_on_budget
 from panto.identification.estimation.least_squares import fit_least_squares
 
 #: Term families of the library, in the order they are generated.
@@ -598,6 +598,9 @@ def discover(structure: ModelStructure, parameters: Mapping[str, float], free: S
                 pair.significant(options.significance):
             best, terms = pair, terms + [second]
     best = refit.resume(best, terms)
+    if not best.significant(options.significance):
+        say(f"discovery: {best.term} on {best.output}: not significant at its optimum")
+        return None
     best = replace(best, ranking=tuple((o, t.formula, round(c, 6))
                                        for o, terms in ranked.items() for t, c in terms))
     say(f"discovery: {best.term} on {best.output}: validation fit "
@@ -638,12 +641,13 @@ class _Refit:
         return hypothesis if math.isfinite(hypothesis.gain) else None
 
     def resume(self, hypothesis: Hypothesis, terms: Sequence[Term]) -> Hypothesis:
-        """`hypothesis` (the refit with `terms`) continued from where it stopped for
-        :data:`~panto.identification.diagnosis.refit.CONTINUATION_FACTOR` times the budget when it stopped on its budget, kept when
-        the continuation fails or ends at a higher training cost: the chosen hypothesis is
-        reported at its optimum, and as the challenge it meets an accepted effect whose refit
-        was continued the same way (:func:`~panto.identification.diagnosis.pipeline.diagnose`)."""
-        if not hypothesis.message.startswith("not converged: maximum"):
+        """`hypothesis` (the refit with `terms`) continued from where it stopped on its budget
+        for :data:`~panto.identification.diagnosis.refit.CONTINUATION_FACTOR` times the budget;
+        kept when the continuation fails or ends at a higher training cost: the chosen hypothesis
+        is reported at its optimum (and :func:`discover` then requires its coefficients to be
+        significant there), and as the challenge it meets an accepted effect whose refit was
+        continued the same way (:mod:`~panto.identification.diagnosis.choice`)."""
+        if not stopped_on_budget(hypothesis):
             return hypothesis
         try:
             further = self._run(hypothesis.output, terms, hypothesis.term,

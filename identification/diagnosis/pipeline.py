@@ -39,8 +39,16 @@ causes it, and how far the gap shrinks once that effect is in the model.
    invalid on the validation run (no static equilibrium at its operating point) is rejected.
    The passing candidate with the largest
    validation improvement is accepted, unless others come within that improvement's standard
-   error: then the lowest ``dBIC`` among them (parsimony, :func:`~panto.identification.diagnosis.choice.choose`); the search repeats on
-   what remains (``max_effects``). Beside the refits, every round tries ``offset`` *between the
+   error: then the lowest ``dBIC`` among them (parsimony,
+   :func:`~panto.identification.diagnosis.choice.choose`). Before that choice every refit that
+   stopped on its budget and could be chosen at its optimum (a passing one within that standard
+   error of the best, a rejected one gaining as much whose rejection is the training side's) is
+   continued once for three times the budget and judged again
+   (:func:`~panto.identification.diagnosis.choice.choose_converged`): the chosen effect's
+   parameters, the gap it closes and the next round's start are those of its optimum, and each
+   step says how its refit ended (``Step.refit``; the report warns when it did not converge).
+   The search repeats on what remains (``max_effects``). Beside the refits, every round tries
+   ``offset`` *between the
    runs* (a sensor re-zeroed, a preload moved between them; the training run cannot show it):
    measured on the withheld run's first fold, judged on the others by the same validation tests
    and ``|d| / sigma_d > 3`` (:mod:`~panto.identification.diagnosis.run_offset`).
@@ -51,8 +59,10 @@ causes it, and how far the gap shrinks once that effect is in the model.
 5. **Challenge.** When effects were accepted and a significant gap remains, the out-of-vocabulary
    mechanisms of the discovery library (a play operator of an input or of the output's own
    simulation: hysteresis, backlash; kinks ``|s - c|`` of the output's own simulation: a
-   sign-blind sensor) are refitted in the nominal (:func:`~panto.identification.diagnosis.challenge.challenge`). When the best of them gains more validation fit points on its
-   output than the accepted effects gain on any output, no effect is named: the vocabulary's best
+   sign-blind sensor) are refitted in the nominal
+   (:func:`~panto.identification.diagnosis.challenge.challenge`; the best one's refit continued
+   as an effect's is). When the best of them gains more validation fit points on its output
+   than the accepted effects gain on any output, no effect is named: the vocabulary's best
    closed only part of a gap that something outside it explains better (a hysteresis is not an
    actuator lag because a lag closes a tenth of its gap).
 
@@ -111,8 +121,9 @@ class Step:
     segments: Mapping[str, Mapping[str, list]]
     """Per output: window start times [s] and residual RMS before/after."""
     alternatives: tuple[str, ...] = ()
-    """Other candidates the data support as well (:func:`~panto.identification.diagnosis.choice.alternatives`): the withheld gain within
-    the folds' standard error, the training ``dBIC`` within 10 (short of strong evidence)."""
+    """Other candidates the data support as well
+    (:func:`~panto.identification.diagnosis.choice.alternatives`): the withheld gain within the
+    folds' standard error, the training ``dBIC`` within 10 (short of strong evidence)."""
     evidence: str = ""
     """Empty when the withheld run confirmed it sample by sample; else the evidence it passed on
     instead (a contact loss on its force's distribution,
@@ -154,8 +165,9 @@ class Diagnosis:
     """When the verdict is ``unexplained``: the best term of the discovery library
     (:func:`~panto.identification.diagnosis.discovery.discover`) refitted in the nominal, with its
     withheld-data gain, as a hypothesis (the verdict stays ``unexplained``); or the
-    out-of-vocabulary term the accepted effects yielded to (:func:`~panto.identification.diagnosis.challenge.challenge`; its ``yielded``
-    says by how much); None otherwise or when no term gains on the withheld run."""
+    out-of-vocabulary term the accepted effects yielded to
+    (:func:`~panto.identification.diagnosis.challenge.challenge`; its ``yielded`` says by how
+    much); None otherwise or when no term gains on the withheld run."""
 
     def gap_closed(self) -> dict[str, float]:
         """Per output: share of the validation residual energy removed by all accepted effects."""
@@ -258,12 +270,14 @@ class DiagnosisOptions:
     (:mod:`~panto.identification.diagnosis.discovery`)."""
     challenge: bool = True
     """When effects were accepted but a significant gap remains, challenge them with the
-    out-of-vocabulary mechanisms of the discovery library (:func:`~panto.identification.diagnosis.challenge.challenger`: a play operator
-    for hysteresis and backlash, kinks ``|s - c|`` for sign-blind sensors) refitted in the
-    nominal: when the best of them gains more on the withheld run than the accepted effects do on
-    any output, the verdict is ``unexplained`` with that term as the hypothesis
-    (:func:`~panto.identification.diagnosis.challenge.challenge`). Independent of :attr:`discovery` (which searches the whole library only
-    after an ``unexplained`` verdict): switch both off for the fastest diagnosis."""
+    out-of-vocabulary mechanisms of the discovery library
+    (:func:`~panto.identification.diagnosis.challenge.challenger`: a play operator for hysteresis
+    and backlash, kinks ``|s - c|`` for sign-blind sensors) refitted in the nominal: when the best
+    of them gains more on the withheld run than the accepted effects do on any output, the verdict
+    is ``unexplained`` with that term as the hypothesis
+    (:func:`~panto.identification.diagnosis.challenge.challenge`). Independent of :attr:`discovery`
+    (which searches the whole library only after an ``unexplained`` verdict): switch both off for
+    the fastest diagnosis."""
     workers: int | None = None
     """Worker processes for a round's candidate refits (:mod:`~panto.identification.diagnosis.
     parallel`; the verdict is the serial one): by default the CPUs available (one inside a
@@ -342,7 +356,7 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
         remaining_gap = _gap(model, validation, current, roles) if steps else gap
         fit_after = fit_per_output(validation, current)
         challenger = challenge(nominal_model, train, validation, fit_before, fit_after,
-                                executor, progress, pool, options.max_evaluations) \
+                               executor, progress, pool, options.max_evaluations) \
             if options.challenge and steps and gap["significant"] and \
             remaining_gap["significant"] and comparable(steps, say) and challengeable(
                 adequacy or adequacy_quietly(nominal, result, train), say) else None
@@ -363,9 +377,10 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
                 "gains within the folds' standard error, training dBIC within 10: a run exciting "
                 "where they differ would tell)" for s in steps if s.alternatives) + \
         _training_only_text(_training_only(rounds, accepted))
-    hypothesis = challenger or (discovery_hypothesis(model, train, validation, executor, progress,
-                                           adequacy or adequacy_quietly(nominal, result, train))
-                                if verdict == "unexplained" and options.discovery else None)
+    hypothesis = challenger or (
+        discovery_hypothesis(model, train, validation, executor, progress,
+                             adequacy or adequacy_quietly(nominal, result, train))
+        if verdict == "unexplained" and options.discovery else None)
     if hypothesis is not None and hypothesis.get("term") is None:
         summary += f" Discovery not run: {hypothesis['summary']}"
     elif hypothesis is not None:
@@ -434,7 +449,6 @@ def _search(model: Model, before: np.ndarray, candidates: Sequence[str], search:
             (", ".join(f"{c['effect']} (ERR {c['err']:.3f})" for c in ranking["top"]) or
              "no significant candidate"))
         trials = map_trials(try_candidate, model, ranking["top"], current, search, pool)
-        trials = choice.settle_ties(trials, ranking["top"], model, current, search)
         trials, chosen = choice.choose_converged(
             trials + _between_runs(model, current, remaining, search), ranking["top"], model,
             current, search)
@@ -570,7 +584,8 @@ def _step(trial: Trial, data: IdentificationData, before: np.ndarray, after: np.
                        "rms_after": s1.residual_rms.tolist()}
     return Step(trial.effect, trial.description, dict(trial.parameters), dict(trial.std),
                 fit_before, fit_after, removed, bands, segments, evidence=trial.evidence,
-                refit=trial.message)
+                refit="" if trial.variant == run_offset.VARIANT else trial.message + (
+                    f"; continued: {trial.continuation}" if trial.continuation else ""))
 
 
 def _summary(verdict: str, effects: Sequence[str], before: Mapping[str, float],

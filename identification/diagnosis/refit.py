@@ -13,6 +13,7 @@ run in parallel through :mod:`~panto.identification.diagnosis.parallel`.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from typing import Any, Mapping
@@ -62,8 +63,9 @@ class Trial:
     """Empty when judged sample by sample on the withheld run; else how it passed instead (a
     contact loss on its force's distribution,
     :mod:`~panto.identification.diagnosis.contact_statistics`)."""
-    continued: bool = False
-    """Whether the refit was continued past the candidates' budget (:func:`continue_refit`)."""
+    continuation: str = ""
+    """Empty when the refit was not continued past the candidates' budget; else how its
+    continuation (:func:`continue_refit`) ended."""
 
 
 @dataclass
@@ -146,8 +148,8 @@ def try_candidate(model: Model, candidate: Mapping[str, Any], current: np.ndarra
     return trial, new, simulated
 
 
-#: How many times the candidates' budget a refit may continue when the withheld run cannot tell
-#: it from another candidate and the training dBIC decides (:func:`continue_refit`).
+#: How many times the candidates' budget a refit that stopped on it may continue when it could be
+#: chosen (:func:`continue_refit`, :func:`~panto.identification.diagnosis.choice.choose_converged`).
 CONTINUATION_FACTOR = 3
 
 
@@ -155,16 +157,22 @@ def continue_refit(candidate: Mapping[str, Any], entry: tuple[Trial, Model, np.n
                    model: Model, current: np.ndarray, search: Search
                    ) -> tuple[Trial, Model, np.ndarray]:
     """`entry` (a trial, its refitted model and free run) with the refit continued from where it
-    stopped on its budget, for :data:`CONTINUATION_FACTOR` times that budget, and judged again; the
-    entry itself when it had converged, the continuation fails or does not lower the training
-    cost. Two candidates that the withheld run cannot tell apart are ranked by their training
-    ``dBIC``, which is only a comparison of their optima when both reached them (held-out case
-    three-mass/actuator_lag/1250: a lag stopped short on 400 simulations lost to a delay by 227
-    dBIC and won by 1230 with four times the budget)."""
+    stopped on its budget, for :data:`CONTINUATION_FACTOR` times that budget, and judged again;
+    the entry itself when it had converged or was continued before; the entry with only
+    :attr:`Trial.continuation` saying so when the continuation fails or does not lower the
+    training cost. Two candidates that the withheld run cannot tell apart are ranked by their
+    training ``dBIC``, which is only a comparison of their optima when both reached them
+    (held-out case three-mass/actuator_lag/1250: a lag stopped short on 400 simulations lost to a
+    delay by 227 dBIC and won by 1230 with four times the budget)."""
     trial, new, _ = entry
-    if not stopped_on_budget(trial) or trial.continued:
+    if not stopped_on_budget(trial) or trial.continuation:
         return entry
     budget = int(search.fit_options.get("max_evaluations") or 400) * CONTINUATION_FACTOR
+
+    def unchanged(why: str) -> tuple[Trial, Model, np.ndarray]:
+        search.say(f"  {candidate['effect']}: continued: {why}; kept as it was")
+        return (dataclasses.replace(trial, continuation=why),) + tuple(entry[1:])
+
     try:
         result = fit_least_squares(new.structure, search.train, free=new.free,
                                    initial=dict(new.parameters),
@@ -172,15 +180,16 @@ def continue_refit(candidate: Mapping[str, Any], entry: tuple[Trial, Model, np.n
         further = Model(new.structure, dict(result.parameters), new.free, dict(result.std),
                         np.asarray(result.covariance, float), dict(result.fit))
         simulated = _finite_run(further, search.validation, search.validation_shift)
-    except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError):
-        return entry
+    except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError) as error:
+        return unchanged(f"failed ({error})")
     _, before = residuals(new.structure, new.parameters, search.train)
     _, after = residuals(further.structure, further.parameters, search.train)
     if not np.nansum(after ** 2) < np.nansum(before ** 2):
-        return entry
+        return unchanged(f"no lower training cost in {budget} more simulations")
     judged = judge_trial(candidate, Refit(further.structure, result, simulated), model,
                          search.train, search.validation, current, search.options.folds)
-    judged = Trial(**{**judged, "description": trial.description, "continued": True,
+    judged = Trial(**{**judged, "description": trial.description,
+                      "continuation": f"up to {budget} more simulations",
                       **linear_explains(candidate["effect"], judged, search.linear_level)})
     search.say(f"  {candidate['effect']}: continued ({result.message}): dBIC "
                f"{trial.delta_bic:.1f} -> {judged.delta_bic:.1f}, validation "
@@ -189,9 +198,10 @@ def continue_refit(candidate: Mapping[str, Any], entry: tuple[Trial, Model, np.n
     return judged, further, simulated
 
 
-def stopped_on_budget(trial: Trial) -> bool:
-    """Whether `trial`'s refit stopped on its simulation budget (not shown to be at an optimum)."""
-    return trial.message.startswith("not converged: maximum")
+def stopped_on_budget(fit: Any) -> bool:
+    """Whether the refit whose ``message`` `fit` carries (a :class:`Trial`, a discovery
+    hypothesis) stopped on its simulation budget (not shown to be at an optimum)."""
+    return fit.message.startswith("not converged: maximum")
 
 
 def _finite_run(model: Model, validation: IdentificationData,

@@ -179,8 +179,8 @@ def _evidence_text(step: Any) -> str:
 
 
 def _not_converged(step: Any) -> str:
-    """A warning when the step's refit stopped on its simulation budget (:attr:`Step.refit`),
-    else ""."""
+    """A warning when the step's refit stopped on its simulation budget
+    (:attr:`~panto.identification.diagnosis.pipeline.Step.refit`), else ""."""
     refit = getattr(step, "refit", "")
     if not refit.startswith("not converged"):
         return ""

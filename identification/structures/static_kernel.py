@@ -398,8 +398,10 @@ def _filter_function():
 def first_order_filter(lam: complex, drive: np.ndarray, z0: complex) -> np.ndarray | None:
     """``z`` with ``z[0] = z0`` and ``z[k+1] = lam z[k] + drive[k]`` (complex, length
     ``len(drive) + 1``), bit for bit ``scipy.signal.lfilter([1], [1, -lam], drive,
-    zi=[lam z0])`` after ``z0``; None without a compiler or with ``PANTO_STATIC_KERNEL=0``
-    (the caller runs lfilter)."""
+    zi=[lam z0])`` after ``z0`` (checked on x86-64 with gcc and this project's SciPy,
+    ``tests/test_lazy_imports.py``: a platform whose SciPy build fuses multiply-adds may differ
+    in the last bit); None without a compiler or with ``PANTO_STATIC_KERNEL=0`` (the caller
+    runs lfilter)."""
     function = _filter_function() if switched_on() else None
     if function is None:
         return None
