@@ -14,6 +14,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from panto.identification.diagnosis.parallel import map_trials
 from panto.identification.diagnosis.refit import (Model, Search, Trial, continue_refit,
                                                   stopped_on_budget)
 from panto.identification.diagnosis.support import BIC_THRESHOLD
@@ -33,7 +34,8 @@ def choose(passing: Sequence[tuple[Trial, Model, np.ndarray]], folds: int
 
 
 def choose_converged(trials: list, candidates: Sequence[Mapping[str, Any]], model: Model,
-                     current: np.ndarray, search: Search) -> tuple[list, tuple | None]:
+                     current: np.ndarray, search: Search, pool: Any = None
+                     ) -> tuple[list, tuple | None]:
     """`trials` (the first ones refits of `candidates`, in order; any after them, the offset
     between the runs, nothing to refit) with the contenders' refits continued, and
     :func:`choose`'s choice among the passing ones (None when none passes).
@@ -50,7 +52,8 @@ def choose_converged(trials: list, candidates: Sequence[Mapping[str, Any]], mode
     and judged again, until no contender is left; so the chosen effect's parameters, the next
     round's start and the gap it closes are those of its optimum (the demo's contact loss and
     friction both stopped on 400 simulations), and a refit the withheld run no longer supports
-    at its optimum is not chosen."""
+    at its optimum is not chosen. Contenders due together are continued side by side on `pool`
+    (:func:`~panto.identification.diagnosis.parallel.map_trials`; the result is the serial one)."""
     trials, folds = list(trials), search.options.folds
     while True:
         passing = [t for t in trials if t[0].accepted]
@@ -61,8 +64,17 @@ def choose_converged(trials: list, candidates: Sequence[Mapping[str, Any]], mode
                _contends(trial, floor, folds)]
         if not due:
             return trials, (choose(passing, folds) if passing else None)
-        for i in due:
-            trials[i] = continue_refit(candidates[i], trials[i], model, current, search)
+        done = map_trials(_continued, model, [(candidates[i], trials[i]) for i in due], current,
+                          search, pool)
+        for i, entry in zip(due, done):
+            trials[i] = entry
+
+
+def _continued(model: Model, item: tuple, current: np.ndarray, search: Search) -> tuple:
+    """:func:`~panto.identification.diagnosis.refit.continue_refit` of ``item = (candidate,
+    entry)`` (a :func:`~panto.identification.diagnosis.parallel.map_trials` task)."""
+    candidate, entry = item
+    return continue_refit(candidate, entry, model, current, search)
 
 
 #: The training-side rejections a refit stopped on its budget may owe to where the budget ran

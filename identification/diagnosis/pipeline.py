@@ -451,7 +451,7 @@ def _search(model: Model, before: np.ndarray, candidates: Sequence[str], search:
         trials = map_trials(try_candidate, model, ranking["top"], current, search, pool)
         trials, chosen = choice.choose_converged(
             trials + _between_runs(model, current, remaining, search), ranking["top"], model,
-            current, search)
+            current, search, pool)
         rounds.append({"ranking": ranking["per_output"], "tried": [t[0].__dict__ for t in trials]})
         if chosen is None:
             say("diagnose: no candidate passes on the withheld data; stop")
