@@ -23,11 +23,11 @@ RATE = 50.0
 LAG = 0.12  # s
 
 
-def _run(seed: int, n: int = 1500) -> IdentificationData:
+def _run(seed: int, n: int = 1500, lag: float = LAG) -> IdentificationData:
     rng = np.random.default_rng(seed)
     u = 2.0 * signal.lfilter(*signal.butter(2, 0.15), rng.normal(size=n))
-    lagged = signal.dlsim(signal.cont2discrete(([1.0], [LAG, 1.0]), 1.0 / RATE, method="foh"),
-                          u)[1][:, 0]
+    lagged = signal.dlsim(signal.cont2discrete(([1.0], [lag, 1.0]), 1.0 / RATE, method="foh"),
+                          u)[1][:, 0] if lag > 0 else u
     bd, ad = signal.bilinear([36.0], [1.0, 3.0, 36.0], fs=RATE)
     y = signal.lfilter(bd, ad, lagged)
     y = y + 0.01 * np.std(y) * rng.normal(size=n)
@@ -189,3 +189,26 @@ def test_a_trial_after_the_candidates_is_never_continued_but_sets_the_bar(monkey
     search = SimpleNamespace(options=SimpleNamespace(folds=4))
     trials, chosen = choice.choose_converged([far, offset], [{"effect": "a"}], None, None, search)
     assert calls == [] and chosen is offset
+
+
+def test_a_lag_ranked_far_from_the_plant_is_located_on_the_grid_before_the_refit(stopped):
+    """With a nominal that has not absorbed the lag (fitted on the same plant without it), the
+    grid of sample periods finds the plant's 0.12 s lag (6 samples at 50 Hz are on the grid) from
+    a start 20 times too long; another effect's start is returned unchanged."""
+    from panto.identification.diagnosis.augmentations import AugmentedStructure
+    from panto.identification.diagnosis.refit import LAG_GRID, located_lag
+
+    _, _, model, _, search = stopped
+    plain = fit_nominal(model.structure, model.free, _run(1, lag=0.0)).parameters
+    setting = {"input": "u", "time_constant_s": 2.4}
+    structure = AugmentedStructure(model.structure, "actuator_lag", search.roles, setting)
+    start = {**plain, "actuator_lag:u": 2.4}
+    located = located_lag(structure, start, search.train)
+    h = search.train.sample_period
+    assert located["actuator_lag:u"] in [k * h for k in LAG_GRID]
+    assert abs(located["actuator_lag:u"] - LAG) <= 2 * h
+    assert _cost((None, Model(structure, located, ())), search) < \
+        _cost((None, Model(structure, start, ())), search)
+    other = AugmentedStructure(model.structure, "offset", search.roles,
+                               {"output": "y", "coefficient": 0.0, "scale": 1.0})
+    assert located_lag(other, dict(plain), search.train) == dict(plain)
