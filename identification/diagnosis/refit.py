@@ -2,14 +2,17 @@
 :func:`~panto.identification.diagnosis.pipeline.diagnose`; the tests are in the pipeline's notes).
 
 :func:`try_candidate` builds the :class:`~panto.identification.diagnosis.augmentations.
-AugmentedStructure`, refits it on the training run (:func:`refit`: the effect's own parameters
-first with the nominal held, then everything; once more from the effect's neutral values when the
+AugmentedStructure`, refits it on the training run (:func:`refit`: a dead zone's centre and width
+and a delay's or a lag's value first taken from grids (:func:`located_zone`,
+:func:`located_lag`), the effect's own parameters first with the nominal held, then everything; once more from the effect's neutral values when the
 ranked start ends below the model it extends; when rejected, for an effect inside the dynamics, or
 a linear one adding dynamics the adequacy's black box shows missing, once more from the
 structure's defaults, the lower training cost kept), simulates it on the validation run and judges
 it (:func:`~panto.identification.diagnosis.support.judge_trial`; a nonlinear effect must also
 validate better than the adequacy's linear black box, :func:`linear_explains`). The round's trials
-run in parallel through :mod:`~panto.identification.diagnosis.parallel`.
+run in parallel through :mod:`~panto.identification.diagnosis.parallel`. A refit that stopped on
+its budget can be continued (:func:`continue_refit`; when, decides
+:func:`~panto.identification.diagnosis.choice.choose_converged`).
 """
 from __future__ import annotations
 
