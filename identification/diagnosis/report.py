@@ -154,8 +154,8 @@ def _shrink_blocks(diagnosis: Any, bands: Path | None,
         blocks += [t.heading(step.effect), t.paragraph(step.description)]
         if step.evidence:
             blocks.append(t.paragraph(_evidence_text(step)))
-        if _not_converged(step):
-            blocks.append(t.paragraph(_not_converged(step)))
+        if warning := _not_converged(step):
+            blocks.append(t.paragraph(warning))
         blocks += [t.table(["parameter", "value", "± (1 σ)", "unit"], rows),
                    t.table(["output", "fit before [%]", "fit after [%]",
                             "residual energy removed [%]"],
@@ -226,8 +226,8 @@ def markdown_report(diagnosis: Any, step_unit_maps: list[Mapping[str, str]]) -> 
         lines += ["", f"## {step.effect}", "", step.description, ""]
         if step.evidence:
             lines += [_evidence_text(step), ""]
-        if _not_converged(step):
-            lines += [_not_converged(step), ""]
+        if warning := _not_converged(step):
+            lines += [warning, ""]
         if step.parameters:
             lines += ["| parameter | value | ± (1 σ) | unit |", "|---|---|---|---|"]
             lines += [f"| {n} | {format_number(v, 5)} | "
