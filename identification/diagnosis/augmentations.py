@@ -17,7 +17,9 @@ Output side (added to one output, the *target*)
     ``sensor_inertia`` ``F - m_s a``: a mass ``m_s`` between the structure and the force sensor
                        (the rig's aluminium bar: ``F_sensor = F_c - m_bar a_bar``), ``a`` the
                        acceleration of the sensor's side (``roles.sensor_position``, the bar's
-                       ``eta``; :func:`~panto.identification.diagnosis.effects.sensor_acceleration`);
+                       ``eta``; :func:`~panto.identification.diagnosis.effects.sensor_acceleration`),
+                       or of the head carrying load cells (``roles.head_position``, ``xi``:
+                       simulated by the structure when the data do not measure it);
     ``extra_mode``     ``y + g (H - 1) w~``, ``H = w_0^2 / (s^2 + 2 zeta w_0 s + w_0^2)`` (Tustin)
                        an unmodelled compliant mode (support resonance) driven by ``w``
                        (gain ``g``, frequency ``f_0`` [Hz], damping ``zeta``).
@@ -44,6 +46,7 @@ Start values come from the FROLS ranking (:mod:`panto.identification.diagnosis.e
 """
 from __future__ import annotations
 
+import copy
 import dataclasses
 import math
 from typing import Any, Mapping
@@ -138,6 +141,29 @@ def _has_inside_form(nominal: ModelStructure, effect: str) -> bool:
     return True
 
 
+def simulating(structure: ModelStructure, name: str) -> ModelStructure | None:
+    """A shallow copy of `structure` that also simulates `name` as its last output (a signal the
+    data do not record: the head's position), or None when it cannot: the leaf structure must
+    list `name` in its ``simulable_outputs``; an augmentation passes it through its base (not
+    one entering as an equivalent input, whose second pass reads the nominal's outputs)."""
+    if name in structure.output_names:
+        return None
+    if isinstance(structure, AugmentedStructure):
+        if structure.mode == "equivalent":
+            return None
+        base = simulating(structure.base, name)
+        if base is None:
+            return None
+        twin = copy.copy(structure)
+        twin.base = base
+    elif name in getattr(structure, "simulable_outputs", ()):
+        twin = copy.copy(structure)
+    else:
+        return None
+    twin.output_names = tuple(structure.output_names) + (name,)
+    return twin
+
+
 class AugmentedStructure(ModelStructure):
     """The nominal structure with one candidate effect added (module notes).
 
@@ -166,6 +192,7 @@ class AugmentedStructure(ModelStructure):
         self.name = f"{nominal.name}+{effect}"
         self.input_names, self.output_names = nominal.input_names, nominal.output_names
         self.base, self.mode = nominal, "wrapper"
+        self._with_sensor: ModelStructure | None = None  # the base simulating the sensor's side
         self._starts: dict[str, float] = {}
         self._bounds: dict[str, tuple[float, float]] = {}
         self.difference_step = getattr(nominal, "difference_step", 1e-6)
@@ -326,8 +353,32 @@ class AugmentedStructure(ModelStructure):
             fine = _refined(data, factor)
             y = np.asarray(self.base.simulate(inner, self._transform_inputs(values, fine)), float)
             return y[::factor]
+        head = self._simulated_sensor(data)
+        if head is not None:  # a sensor position the data lack: the structure simulates it too
+            if self._with_sensor is None:
+                self._with_sensor = simulating(self.base, head)
+            if self._with_sensor is None:
+                raise IdentificationError(f"{self.name}: {self.base.name} cannot simulate "
+                                          f"{head!r}, whose acceleration the sensor mass follows")
+            both = np.array(self._with_sensor.simulate(inner, data), float)
+            return self._transform_outputs(values, data, both[:, :-1], sensor=both[:, -1])
         y = np.array(self.base.simulate(inner, data), float)
         return self._transform_outputs(values, data, y)
+
+    def _sensor(self, data: IdentificationData) -> str | None:
+        """The signal whose acceleration the sensor's mass follows: the ranked variant's
+        (``setting["signal"]``: the bar's ``eta`` or the head's ``xi``), else by the roles."""
+        return self.setting.get("signal") or sensor_signal(
+            self.roles, tuple(data.input_names) + tuple(self.output_names))
+
+    def _simulated_sensor(self, data: IdentificationData) -> str | None:
+        """The sensor mass's position when it is neither an input nor a simulated output of
+        `data` (a head the data do not measure), else None."""
+        if self.effect != "sensor_inertia":
+            return None
+        sensor = self._sensor(data)
+        known = tuple(data.input_names) + tuple(self.output_names)
+        return sensor if sensor is not None and sensor not in known else None
 
     def _on_output(self) -> bool:
         return self.effect == "saturation" and self.setting.get("signal") in self.output_names \
@@ -414,7 +465,7 @@ class AugmentedStructure(ModelStructure):
         return motion(position, data.sample_period, _DERIVATIVE_CUTOFF)
 
     def _transform_outputs(self, values: Mapping[str, float], data: IdentificationData,
-                           y: np.ndarray) -> np.ndarray:
+                           y: np.ndarray, sensor: np.ndarray | None = None) -> np.ndarray:
         s, effect = self.setting, self.effect
         target = self.output_names.index(self._force() if effect in
                                          ("sensor_inertia", "coulomb_friction", "contact_loss")
@@ -422,8 +473,8 @@ class AugmentedStructure(ModelStructure):
         if effect == "offset":
             y[:, target] += values[f"offset:{s['output']}"]
         elif effect == "sensor_inertia":
-            sensor = sensor_signal(self.roles, tuple(data.input_names) + tuple(self.output_names))
-            acceleration = sensor_acceleration(self._signal(sensor, data, y), data.sample_period)
+            position = sensor if sensor is not None else self._signal(self._sensor(data), data, y)
+            acceleration = sensor_acceleration(position, data.sample_period)
             y[:, target] -= values[f"sensor_inertia:{self._force()}"] * acceleration
         elif effect == "extra_mode":
             drive = self._signal(s.get("drive") or self._input(), data, y)
@@ -536,10 +587,12 @@ def describe_augmentation(structure: AugmentedStructure) -> str:
              "equivalent": "inside the dynamics, as an equivalent input",
              "inside": "inside the dynamics", "wrapper": "input side" if structure.effect in
              INPUT_SIDE else "output side"}[structure.mode]
+    if structure.effect == "sensor_inertia" and structure.setting.get("signal"):
+        where += f", the mass moves with {structure.setting['signal']}"
     return (f"{structure.effect} ({where}; parameters "
             f"{', '.join(structure.effect_parameters) or 'none'})")
 
 
 __all__ = ["AugmentedStructure", "mode_response", "describe_augmentation", "INPUT_SIDE",
            "OUTPUT_SIDE", "INSIDE", "NATIVE_PARAMETERS", "NATIVE_SWITCHES", "EQUIVALENT_INPUTS",
-           "equivalent_input", "stick_slip_run"]
+           "equivalent_input", "stick_slip_run", "simulating"]

@@ -14,7 +14,8 @@ cubic_stiffness   ``x~^3``, ``x~|x~|`` (``x~ = x - median x``)
 dead_zone         ``dz(u~, b) - u~ = -clip(u~, -b, b)`` of actuators; backlash ``play_b(x) - x``
 input_delay       ``u(t - d) - u(t)`` over delays ``d``
 actuator_lag      ``L_T u - u``, ``L_T`` the first-order low-pass of time constant ``T``
-sensor_inertia    acceleration of the sensor side (``x_s''``, :func:`sensor_acceleration`)
+sensor_inertia    acceleration of the sensor side (``x_s''``, :func:`sensor_acceleration`) or of
+                  the head (``xi''``: load cells inside it)
 extra_mode        ``(H_{f,zeta} - 1) w``: dynamic part of a 2nd-order mode driven by force/input
 contact_loss      ``max(F, 0) - F`` of the simulated force
 offset            ``1``
@@ -82,6 +83,13 @@ class SignalRoles:
         bar, thesis chapter 3, ``F_sensor = F_c - m_bar eta''``; not the cross bar ``y_cb``, which
         the head suspension decouples from the bar above a few hertz). None, or a name absent from
         the data: `position`.
+    head_position : str or None
+        Position of the body that carries the contact strips, when the force is measured inside
+        it (load cells under the strips, as on a measuring pantograph): the strips' mass above
+        the cells moves with the head, ``F_sensor = F_c - m_s xi''`` (EN 50317 corrects the
+        measured force for this inertia). A second placement of ``sensor_inertia`` beside
+        `sensor_position`; the structure simulates it when the data do not measure it
+        (:func:`~panto.identification.diagnosis.ranking.head_signal`). None: not tried.
     """
 
     position: str | None = "y_cb"
@@ -91,6 +99,7 @@ class SignalRoles:
     actuators: tuple[str, ...] = ("eta", "p")
     mode_drive: str | None = None
     sensor_position: str | None = "eta"
+    head_position: str | None = "xi"
 
 
 PANTOGRAPH_ROLES = SignalRoles()
@@ -359,6 +368,10 @@ def build_candidate_regressors(signals: Mapping[str, np.ndarray], sample_period:
     elif sensor is not None:
         out["sensor_inertia"] = {f"{sensor}''": (sensor_acceleration(get(sensor), dt),
                                                  {"signal": sensor})}
+    head = roles.head_position
+    if has(head) and head != sensor:  # the strips' mass above load cells inside the head
+        out.setdefault("sensor_inertia", {})[f"{head}''"] = (sensor_acceleration(get(head), dt),
+                                                             {"signal": head})
     drive = roles.mode_drive or (roles.force if has(roles.force) else (actuators or [None])[0])
     if drive is not None and has(drive):
         out["extra_mode"] = _modes(get(drive), drive, options, dt)

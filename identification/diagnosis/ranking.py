@@ -12,7 +12,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from panto.identification.diagnosis.augmentations import INPUT_SIDE, equivalent_input
+from panto.identification.diagnosis.augmentations import INPUT_SIDE, equivalent_input, simulating
 from panto.identification.estimation.base import IdentificationData, IdentificationError, ModelStructure
 from panto.identification.diagnosis.support import residuals, sensitivities
 from panto.identification.structures.oscillators import (OUTPUT_NAMES, OscillatorStructure,
@@ -65,6 +65,9 @@ def rank_candidates(model: Any, train: IdentificationData, roles: SignalRoles,
     equivalent input); output-side signatures are scored as they are."""
     y_hat, eps = residuals(model.structure, model.parameters, train)
     signals = name_signals(train.inputs, train.input_names, y_hat, train.output_names)
+    head = head_signal(model, train, roles, signals) if "sensor_inertia" in candidates else None
+    if head is not None:
+        signals[roles.head_position] = head
     regressors = {k: v for k, v in build_candidate_regressors(
         signals, train.sample_period, roles=roles).items() if k in candidates}
     if not regressors:
@@ -106,6 +109,26 @@ def rank_candidates(model: Any, train: IdentificationData, roles: SignalRoles,
         candidate["err_total"] = total[key]
     top = sorted(best.values(), key=lambda c: (not c["significant"], -c["err_total"]))
     return {"top": top[:max_refits], "per_output": per_output}
+
+
+def head_signal(model: Any, data: IdentificationData, roles: SignalRoles,
+                signals: Mapping[str, np.ndarray]) -> np.ndarray | None:
+    """The head's position (``roles.head_position``) as the current model simulates it on
+    `data`, when the data do not measure it; None when they do, when the roles name no head
+    or when the structure cannot simulate it (a black box, a rigid body)."""
+    head = roles.head_position
+    twin = None if head is None or head in signals else simulating(model.structure, head)
+    if twin is None:
+        return None
+    try:
+        y = np.asarray(twin.simulate(model.parameters, data), float)
+    except (IdentificationError, ValueError, KeyError, IndexError, ArithmeticError,
+            np.linalg.LinAlgError):
+        return None
+    if y.ndim != 2 or y.shape[1] != len(data.output_names) + 1 or \
+            not np.all(np.isfinite(y[:, -1])):
+        return None
+    return y[:, -1]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -230,7 +253,8 @@ def _setting(score: Any, output: str, coefficient: float, signals: Mapping[str, 
     if position is not None:
         setting["centre"] = float(np.median(position))
         setting["position_scale"] = float(np.std(position)) or 1.0
-    sensor = sensor_signal(roles, list(signals))
+    sensor = score.setting.get("signal") if score.effect == "sensor_inertia" else None
+    sensor = sensor if sensor in signals else sensor_signal(roles, list(signals))
     if sensor is not None:  # the acceleration sensor_inertia's mass follows (its bound's scale)
         setting["acceleration_scale"] = float(np.std(sensor_acceleration(
             signals[sensor], data.sample_period))) or 1.0
@@ -297,4 +321,4 @@ def input_paths(model: Any, data: IdentificationData,
     return out
 
 
-__all__ = ["rank_candidates", "input_paths", "MIN_ERR", "PATH_BUDGET"]
+__all__ = ["rank_candidates", "input_paths", "head_signal", "MIN_ERR", "PATH_BUDGET"]

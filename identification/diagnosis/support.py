@@ -92,7 +92,7 @@ def default_roles(structure: ModelStructure, data: IdentificationData) -> Signal
     otherwise the first output as position and every input an actuator."""
     if structure.name.startswith("rigid-body"):
         return SignalRoles(position=data.input_names[0], force=None, actuators=(),
-                           sensor_position=None)
+                           sensor_position=None, head_position=None)
     names = set(data.input_names) | set(data.output_names)
     if names <= PANTOGRAPH_SIGNALS:
         return SignalRoles(position="y_cb" if "y_cb" in data.output_names else "eta",
@@ -100,7 +100,8 @@ def default_roles(structure: ModelStructure, data: IdentificationData) -> Signal
                            actuators=tuple(a for a in ("eta", "p") if a in data.input_names),
                            sensor_position="eta" if "eta" in data.input_names else None)
     return SignalRoles(position=data.output_names[0], force=None,
-                       actuators=tuple(data.input_names), sensor_position=None)
+                       actuators=tuple(data.input_names), sensor_position=None,
+                       head_position=None)
 
 
 # --- residuals and statistics ---------------------------------------------------------------

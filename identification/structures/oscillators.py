@@ -77,6 +77,8 @@ class OscillatorStructure(ModelStructure):
     """
 
     input_names = INPUT_NAMES
+    #: Every output the structure can simulate (``output_names`` picks the fitted ones).
+    simulable_outputs = OUTPUT_NAMES
 
     def __init__(self, masses: int, friction: bool = False, *,
                  outputs: Sequence[str] = DEFAULT_OUTPUTS, hold: str = "foh", substeps: int = SUBSTEPS):

@@ -88,6 +88,8 @@ class _PhysicalBase(ModelStructure):
     """What both physical structures share: parameters, bounds, the value checks."""
 
     input_names = INPUT_NAMES
+    #: Every output the structure can simulate (``output_names`` picks the fitted ones).
+    simulable_outputs = OUTPUT_NAMES
     extensions: tuple[str, ...] = ()
 
     def __init__(self, *, outputs: Sequence[str] = DEFAULT_OUTPUTS,
