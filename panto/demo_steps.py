@@ -18,6 +18,12 @@ Progress = Callable[[str], None]
 #: The thesis' rig campaign: label, embedded profile, seed of the sensor noise.
 CAMPAIGN = (("training", "aprbs_training.json", 1), ("validation", "ramps_validation.json", 2))
 
+#: The demo camera's libx264 encoding: "ultrafast" (no CABAC, B-frames or deblocking) at crf 16
+#: encodes a run in about half the CPU time of the camera's default ("superfast", crf 18), and
+#: the tracker decodes it in about half; the tracked centres are as close to the camera's truth
+#: (``benchmarks/demo_filming_speed.md``, ``tests/test_video_demo_encoding.py``).
+VIDEO_PRESET, VIDEO_CRF = "ultrafast", 16.0
+
 
 def fit_percent(measured: np.ndarray, simulated: np.ndarray) -> float:
     """Fit % = 100 (1 - ||y - y_hat|| / ||y - mean(y)||) over the finite samples (thesis 4.1.3)."""
@@ -220,7 +226,7 @@ def _film_one(label: str, folder: Path, video_dir: Path, settings: Any,
         else CameraSetup()
     clock = time.perf_counter()
     video = render_run(folder, video_dir / f"{label}.mp4", setup=camera, rng=7,
-                       duration=settings.video_window)
+                       duration=settings.video_window, preset=VIDEO_PRESET, crf=VIDEO_CRF)
     rendered = time.perf_counter() - clock
     tracker = setup_from_camera(video.camera_json)
     tracker.save(video_dir / f"{label}_setup.json")

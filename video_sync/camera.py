@@ -306,8 +306,7 @@ class CameraRenderer:
         """One frame: RGB uint8, marker centres (column, row) and visibility."""
         setup = self.setup
         gain = self.gain(frame)
-        lut = np.clip(np.arange(256) * gain + 0.5, 0, 255).astype(np.uint8)
-        image = lut[self._bank[frame % self._BANK]]
+        image = self.lit_screen(frame, gain)
         pixels, visible = {}, {}
         for marker in setup.markers:
             x, y = positions.get(marker.name, marker.anchor_m)
@@ -321,6 +320,16 @@ class CameraRenderer:
         colour = setup.led.on_colour if led else setup.led.off_colour
         self._paint_disc(image, setup.led.centre_px, setup.led.radius_px, colour, gain)
         return image, pixels, visible
+
+    def lit_screen(self, frame: int, gain: float) -> np.ndarray:
+        """The frame's noisy screen under the lighting `gain`, RGB uint8 (a new array).
+
+        Each pixel is ``uint8(clip(v gain + 1/2, 0, 255))`` of its value ``v`` in one of the
+        noisy copies of the screen, looked up in a 256-entry table (``take``: about half the
+        time of fancy indexing on a 960 x 540 frame, the same values).
+        """
+        lut = np.clip(np.arange(256) * gain + 0.5, 0, 255).astype(np.uint8)
+        return lut.take(self._bank[frame % self._BANK])
 
     def _inside(self, centre: tuple[float, float], radius: float) -> bool:
         return (radius <= centre[0] <= self.setup.width - 1 - radius
