@@ -9,8 +9,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from fixtures.video_truth import marker_truth, pixel_errors
 from panto.demo_steps import VIDEO_CRF, VIDEO_PRESET
-from panto.rig.dataset import Dataset, RunMetadata
 from panto.video_sync.camera import CameraRenderer, CameraSetup, ShadowEvent, render_run
 from panto.video_sync.setup import setup_from_camera
 from panto.video_sync.tracking import track_video
@@ -60,30 +60,6 @@ def test_lit_screen_by_take_equals_the_reference_bit_for_bit(reference):
     assert edges > 5  # the sweep took the pan-head onto the frame's edges
 
 
-def _truth(seconds):
-    """Known marker paths over the rig's range and a PRBS LED (holds 6 .. 30 ms)."""
-    rng = np.random.default_rng(4)
-    time = np.arange(0.0, seconds, 0.002)
-    channels = {"x_cb": 0.105 + 0.004 * np.sin(2 * np.pi * 0.7 * time),
-                "xi": 2.0 + 0.11 * np.sin(2 * np.pi * 1.3 * time + 1.0),
-                "y_cb": 2.0 + 0.09 * np.sin(2 * np.pi * 1.1 * time),
-                "eta": 2.0 + 0.06 * np.sin(2 * np.pi * 2.0 * time + 2.0)}
-    led, bit = [], 0
-    while len(led) < time.size:
-        led += [bit] * int(rng.integers(3, 16))
-        bit = 1 - bit
-    channels["led"] = np.array(led[:time.size], dtype=float)
-    units = {name: "m" for name in channels} | {"led": "1"}
-    return Dataset(time, channels, units, RunMetadata(sample_rate=500.0, source="emulator"))
-
-
-def _mean_pixel_error(result, track, name):
-    marker = track.markers[name]
-    drawn = result.pixels[name][marker.valid]
-    return float(np.mean(np.hypot(marker.x_px[marker.valid] - drawn[:, 0],
-                                  marker.y_px[marker.valid] - drawn[:, 1])))
-
-
 def test_demo_encoding_tracks_as_close_to_the_truth_as_the_default(tmp_path):
     """The same frames (same seed) encoded twice: the camera's default (superfast, crf 18) and
     the demo's; each is tracked and compared with the drawn centres.
@@ -93,7 +69,7 @@ def test_demo_encoding_tracks_as_close_to_the_truth_as_the_default(tmp_path):
     stay within the 0.5 px of the H.264 tracking test, and the LED bits and the lost frames
     (the shadow) must be the same.
     """
-    truth = _truth(3.5)
+    truth = marker_truth(3.5, seed=4)
     camera = replace(DEMO_CAMERA, shadow=ShadowEvent("cross_bar", first_frame=40, frame_count=10))
     tracks = {}
     for name, options in (("default", {}), ("demo", {"preset": VIDEO_PRESET, "crf": VIDEO_CRF})):
@@ -106,8 +82,8 @@ def test_demo_encoding_tracks_as_close_to_the_truth_as_the_default(tmp_path):
     assert (info.codec, info.frame_count) == ("h264", demo.frame_count)  # a real H.264 file
     assert all(np.array_equal(demo.pixels[m], default.pixels[m]) for m in demo.pixels)
     for name in demo_track.markers:
-        error, reference = (_mean_pixel_error(demo, demo_track, name),
-                            _mean_pixel_error(default, default_track, name))
+        error, reference = (float(np.mean(pixel_errors(demo, demo_track, name))),
+                            float(np.mean(pixel_errors(default, default_track, name))))
         assert error < 0.5 and reference < 0.5, name
         assert error <= reference + 0.05, (name, error, reference)
     assert np.array_equal(demo_track.led, demo.led)

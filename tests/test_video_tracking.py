@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from panto.rig.dataset import Dataset, RunMetadata
+from fixtures.video_truth import marker_truth, pixel_errors
 from panto.video_sync.camera import CameraSetup, ShadowEvent, render_run
 from panto.video_sync.plots import plot_detection_steps
 from panto.video_sync.setup import make_setup, setup_from_camera
@@ -17,23 +17,6 @@ from panto.video_sync.tracking import (SetupError, TrackerSetup, TrackResult, di
 SHADOW = ShadowEvent("cross_bar", first_frame=30, frame_count=12)
 
 
-def _truth(seconds, seed=0):
-    """Known marker paths (sines within the rig's range) and a PRBS LED (holds 6 .. 30 ms)."""
-    rng = np.random.default_rng(seed)
-    time = np.arange(0.0, seconds, 0.002)
-    channels = {"x_cb": 0.105 + 0.004 * np.sin(2 * np.pi * 0.7 * time),
-                "xi": 2.0 + 0.10 * np.sin(2 * np.pi * 1.3 * time + 1.0),
-                "y_cb": 2.01 + 0.08 * np.sin(2 * np.pi * 1.1 * time),
-                "eta": 2.0 + 0.05 * np.sin(2 * np.pi * 2.0 * time + 2.0)}
-    led, bit = [], 0
-    while len(led) < time.size:
-        led += [bit] * int(rng.integers(3, 16))
-        bit = 1 - bit
-    channels["led"] = np.array(led[:time.size], dtype=float)
-    units = {name: "m" for name in channels} | {"led": "1"}
-    return Dataset(time, channels, units, RunMetadata(sample_rate=500.0, source="emulator"))
-
-
 def _small_camera():
     return replace(CameraSetup().reduced(1 / 3), shadow=SHADOW)
 
@@ -41,7 +24,7 @@ def _small_camera():
 @pytest.fixture(scope="module")
 def lossless(tmp_path_factory):
     folder = tmp_path_factory.mktemp("lossless")
-    truth = _truth(2.0)
+    truth = marker_truth(2.0)
     truth.write(folder / "truth.csv")  # render from a run folder, as the CLI does
     result = render_run(folder, folder / "video.mkv", setup=_small_camera(), codec="lossless",
                         rng=3)
@@ -52,16 +35,9 @@ def lossless(tmp_path_factory):
 def h264_full_hd(tmp_path_factory):
     folder = tmp_path_factory.mktemp("h264")
     camera = replace(CameraSetup(), shadow=replace(SHADOW, first_frame=10, frame_count=5))
-    result = render_run(_truth(1.0, seed=1), folder / "video.mp4", setup=camera, codec="h264",
+    result = render_run(marker_truth(1.0, seed=1), folder / "video.mp4", setup=camera, codec="h264",
                         rng=5, duration=0.6)
     return result, track_video(result.path, setup_from_camera(result.camera_json))
-
-
-def _pixel_errors(result, track, name):
-    marker = track.markers[name]
-    valid = marker.valid
-    return np.hypot(marker.x_px[valid] - result.pixels[name][valid, 0],
-                    marker.y_px[valid] - result.pixels[name][valid, 1])
 
 
 def test_disk_footprint_is_the_defined_shape():
@@ -105,7 +81,7 @@ def test_isodata_threshold_splits_two_clusters_half_way():
 def test_lossless_centroids_are_sub_pixel_true(lossless):
     _, result, track = lossless
     for name in track.markers:
-        errors = _pixel_errors(result, track, name)
+        errors = pixel_errors(result, track, name)
         assert errors.size > 0.8 * result.frame_count
         assert errors.mean() < 0.15, name
 
@@ -113,7 +89,7 @@ def test_lossless_centroids_are_sub_pixel_true(lossless):
 def test_h264_444_centroids_within_half_a_pixel(h264_full_hd):
     result, track = h264_full_hd
     for name in track.markers:
-        assert _pixel_errors(result, track, name).mean() < 0.5, name
+        assert pixel_errors(result, track, name).mean() < 0.5, name
     assert np.array_equal(track.led, result.led)
 
 
@@ -209,7 +185,7 @@ def test_setup_routine_from_clicks_finds_colour_radius_and_threshold(lossless, t
     assert saved == setup
     track = track_video(result.path, saved)
     for name in clicks:
-        assert _pixel_errors(result, track, name).mean() < 0.15, name
+        assert pixel_errors(result, track, name).mean() < 0.15, name
     np.testing.assert_array_equal(track.led, result.led)
     picture = plot_detection_steps(result.path, saved, 5, tmp_path / "steps.png")
     assert picture.stat().st_size > 10_000
@@ -250,7 +226,7 @@ def test_camera_side_file_keeps_the_start_as_labelled_truth(lossless):
 def test_cli_renders_sets_up_and_tracks(tmp_path, capsys):
     from panto.cli import main
 
-    _truth(1.5, seed=2).write(tmp_path / "truth.csv")
+    marker_truth(1.5, seed=2).write(tmp_path / "truth.csv")
     video = tmp_path / "camera.mp4"
     assert main(["video", "render", str(tmp_path), "--out", str(video), "--duration", "0.8",
                  "--scale", "0.3333", "--seed", "4"]) == 0
@@ -336,7 +312,7 @@ def test_parallel_segments_track_exactly_as_one_serial_pass(short_gops):
     # the shadow (frames 30 .. 41) covers segment starts 30 and 40: a segment may start lost
     assert serial.lost_frames["cross_bar"] == np.count_nonzero(~result.visible["cross_bar"]) > 0
     for name in serial.markers:
-        assert _pixel_errors(result, serial, name).mean() < 0.5, name
+        assert pixel_errors(result, serial, name).mean() < 0.5, name
     lines = []
     parallel = track_video(path, setup, workers=2, progress=lines.append)  # local process pool
     segments = -(-result.frame_count // 10)  # one per group of pictures (at most 4 per worker)
