@@ -143,9 +143,10 @@ def _has_inside_form(nominal: ModelStructure, effect: str) -> bool:
 
 def simulating(structure: ModelStructure, name: str) -> ModelStructure | None:
     """A shallow copy of `structure` that also simulates `name` as its last output (a signal the
-    data do not record: the head's position), or None when it cannot: the leaf structure must
-    list `name` in its ``simulable_outputs``; an augmentation passes it through its base (not
-    one entering as an equivalent input, whose second pass reads the nominal's outputs)."""
+    data do not record: the head's position), or None when it cannot or already simulates it:
+    the leaf structure must list `name` in its ``simulable_outputs``; an augmentation passes it
+    through its base (not one entering as an equivalent input, whose second pass reads the
+    nominal's outputs)."""
     if name in structure.output_names:
         return None
     if isinstance(structure, AugmentedStructure):

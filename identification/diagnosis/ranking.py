@@ -122,8 +122,7 @@ def head_signal(model: Any, data: IdentificationData, roles: SignalRoles,
         return None
     try:
         y = np.asarray(twin.simulate(model.parameters, data), float)
-    except (IdentificationError, ValueError, KeyError, IndexError, ArithmeticError,
-            np.linalg.LinAlgError):
+    except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError):
         return None
     if y.ndim != 2 or y.shape[1] != len(data.output_names) + 1 or \
             not np.all(np.isfinite(y[:, -1])):
