@@ -197,7 +197,8 @@ def plot_trajectories(t: np.ndarray, inputs: dict, zero: float, measured: dict, 
 
 def film_runs(state: dict[str, Any], progress: Progress) -> dict:
     """Step 2b: film, track, synchronise and merge a window of each run (camera at reduced
-    resolution: a 1080p frame costs ~37 s of rendering per 20 s of video on this machine).
+    resolution, encoded with :data:`VIDEO_PRESET`: ~16 s of CPU per 30 s window at 960 x 540 on
+    this machine, ``benchmarks/demo_filming_speed.md``).
 
     The runs are filmed side by side like :func:`run_rig_campaign` runs them when
     ``settings.workers`` > 1; :func:`panto.demo.run_demo` runs this step itself in a worker
