@@ -314,3 +314,63 @@ def test_panto_identify_initial_data_prints_the_verdict_and_keeps_it_in_result_j
     assert report["fixed_at_prior"] == {}  # the valley is named, not fixed
     for name in ("k2", "m2"):
         assert report["parameters"][name]["value"] == pytest.approx(PLANT[name], rel=0.05)
+
+
+# --- the polish's finite-difference columns evaluated together ----------------------------------
+
+def test_stacked_modal_responses_are_the_single_ones_bit_for_bit_or_left_to_them():
+    from panto.identification.estimation.frequency_response import modal_frequency_responses
+
+    def system(a):
+        return (np.array(a, float), np.array([[0.0, 1.0], [1.0, 0.5]]),
+                np.array([[1.0, 0.2]]), np.array([[0.0, 0.1]]))
+
+    resonant = [system([[0.0, 1.0], [-400.0, -4.0]]), system([[0.0, 1.0], [-900.0, -2.0]])]
+    overdamped = system([[-3.0, 0.0], [1.0, -50.0]])  # real eigenvalues
+    unstable = system([[0.0, 1.0], [-400.0, 3.0]])
+    defective = system([[-5.0, 1.0], [0.0, -5.0]])  # a Jordan block: the matrix exponential
+    frequency = np.linspace(0.5, 80.0, 40)
+
+    def single(s):
+        return discrete_frequency_response(s, frequency, 1 / RATE, "foh", stable=True)
+
+    mixed = [resonant[0], overdamped, unstable, defective, resonant[1]]
+    stacked = modal_frequency_responses(mixed, frequency, 1 / RATE, "foh", stable=True)
+    assert [r is None for r in stacked] == [False, True, True, True, False]
+    for k in (0, 4):
+        assert np.array_equal(stacked[k], single(mixed[k]))
+    real = modal_frequency_responses([overdamped, overdamped], frequency, 1 / RATE, "zoh")
+    assert np.array_equal(real[1], discrete_frequency_response(overdamped, frequency, 1 / RATE,
+                                                               "zoh"))
+
+
+def test_the_polish_evaluates_its_jacobian_columns_together_with_the_same_result(monkeypatch):
+    from panto.identification.estimation import global_fit
+    from panto.identification.estimation.global_fit import FrequencyFitOptions, initial_from_data
+
+    if not global_fit.BATCHED_COLUMNS:
+        pytest.skip("SciPy < 1.16: least_squares has no workers")
+    structure = OscillatorStructure(2, outputs=("F_c",))
+    rng = np.random.default_rng(8)
+    t, eta, p = _inputs(10.0, rng)
+    blank = IdentificationData(t, np.column_stack([eta, p]), np.zeros((len(t), 1)),
+                               ("eta", "p"), ("F_c",))
+    force = structure.simulate({"c1": 300.0, "k2": 9000.0}, blank)[:, 0]
+    data = IdentificationData(t, blank.inputs, (force + 0.03 * force.std() * rng.normal(
+        size=len(t)))[:, None], ("eta", "p"), ("F_c",))
+    batches = []
+    columns = global_fit._ReducedCost.columns
+    monkeypatch.setattr(global_fit._ReducedCost, "columns",
+                        lambda self, f, points: batches.append(1) or columns(self, f, points))
+    options = FrequencyFitOptions(screening=32, starts=4)
+    found = {}
+    for batched in (False, True):
+        monkeypatch.setattr(global_fit, "BATCHED_COLUMNS", batched)
+        found[batched] = initial_from_data(structure, data, structure.default_free(),
+                                           options=options)
+        assert bool(batches) == batched  # the columns went through `columns` when batched
+    assert len(found[True]) == len(found[False]) > 0
+    for plain, together in zip(found[False], found[True]):
+        assert list(plain.parameters) == list(together.parameters)
+        assert np.array_equal(list(plain.parameters.values()), list(together.parameters.values()))
+        assert (plain.cost, plain.rms) == (together.cost, together.rms)

@@ -6,7 +6,7 @@
   :mod:`panto.identification.estimation.global_fit`).
 - :func:`discrete_frequency_response`: the response of the exact discretisation (first- or
   zero-order hold) of a continuous ``(A, B, C, D)``, comparable with the H1 estimate up to the
-  Nyquist frequency.
+  Nyquist frequency; :func:`modal_frequency_responses`: the same for several systems at once.
 """
 from __future__ import annotations
 
@@ -166,25 +166,14 @@ def discrete_frequency_response(system: Sequence[np.ndarray], frequency: np.ndar
     -------
     ndarray, shape (n_f, n_outputs, n_inputs), complex
     """
-    a, b, c, d = (np.atleast_2d(np.asarray(x, float)) for x in system)
-    z = np.exp(2j * np.pi * np.asarray(frequency, float) * period)
+    a, b, c, d = _matrices(system)
     lam, vectors = np.linalg.eig(a)
     if stable and np.max(lam.real) >= 0:
         raise IdentificationError("unstable linear system")
     if np.linalg.cond(vectors) < 1e8:
-        x = lam * period
-        small = np.abs(x) < 1e-4
-        safe = np.where(small, 1.0, x)
-        mu = np.exp(x)
-        g0 = np.where(small, period * (1 + x / 2 + x * x / 6), (mu - 1) / safe * period)
-        g1 = np.where(small, period * (0.5 + x / 6 + x * x / 24),
-                      (mu - 1 - x) / (safe * safe) * period)
-        if hold != "foh":
-            g1 = np.zeros_like(g1)
-        modal_b = np.linalg.solve(vectors, b.astype(complex))
-        modal_c = c @ vectors
-        weights = (g0 + (z[:, None] - 1) * g1) / (z[:, None] - mu)
-        return np.stack([(weights * row) @ modal_b for row in modal_c], 1) + d
+        return _modal_responses(lam[None], vectors[None], b[None], c[None], d[None], frequency,
+                                period, hold)[0]
+    z = np.exp(2j * np.pi * np.asarray(frequency, float) * period)
     n, m = b.shape
     block = np.zeros((n + 2 * m, n + 2 * m))
     block[:n, :n], block[:n, n:n + m] = a * period, b * period
@@ -196,5 +185,69 @@ def discrete_frequency_response(system: Sequence[np.ndarray], frequency: np.ndar
     return c @ np.linalg.solve(z[:, None, None] * np.eye(n) - phi, drive) + d
 
 
+def modal_frequency_responses(systems: Sequence[Sequence[np.ndarray]], frequency: np.ndarray,
+                              period: float, hold: str = "foh", *, stable: bool = False
+                              ) -> list[np.ndarray | None]:
+    """:func:`discrete_frequency_response` of several systems of the same shapes at once, bit
+    for bit, where it takes the modal path: the eigen decompositions, condition numbers, solves
+    and products are stacked (numpy calls the same LAPACK or BLAS routine for every matrix of a
+    stack), the rest is elementwise.
+
+    Returns
+    -------
+    list of ndarray or None
+        The response of each system, or None where :func:`discrete_frequency_response` must
+        answer: a defective, unstable (with `stable`) or non-finite ``A``, or one with real
+        eigenvalues among systems with complex ones (numpy's stacked ``eig`` returns them as
+        complex numbers, which the single call does not).
+    """
+    matrices = [_matrices(system) for system in systems]
+    if not matrices or len({tuple(x.shape for x in m) for m in matrices}) > 1:
+        return [None] * len(matrices)
+    a, b, c, d = (np.stack(x) for x in zip(*matrices))
+    try:
+        lam, vectors = np.linalg.eig(a)
+    except np.linalg.LinAlgError:  # a non-finite A, or no convergence for one of them
+        return [None] * len(matrices)
+    take = np.linalg.cond(vectors) < 1e8
+    if stable:
+        take &= np.max(lam.real, axis=1) < 0
+    if np.iscomplexobj(lam):
+        take &= np.any(lam.imag != 0, axis=1)
+    responses: list[np.ndarray | None] = [None] * len(matrices)
+    if take.any():
+        for k, response in zip(np.flatnonzero(take), _modal_responses(
+                lam[take], vectors[take], b[take], c[take], d[take], frequency, period, hold)):
+            responses[k] = response
+    return responses
+
+
+def _matrices(system: Sequence[np.ndarray]) -> tuple[np.ndarray, ...]:
+    """``(A, B, C, D)`` as two-dimensional float arrays."""
+    return tuple(np.atleast_2d(np.asarray(x, float)) for x in system)
+
+
+def _modal_responses(lam: np.ndarray, vectors: np.ndarray, b: np.ndarray, c: np.ndarray,
+                     d: np.ndarray, frequency: np.ndarray, period: float, hold: str) -> np.ndarray:
+    """Responses of a stack of systems from their eigen decompositions ``A = V diag(lambda)
+    V^-1`` (module notes of :mod:`panto.identification.estimation.global_fit`), shape
+    ``(n_systems, n_f, n_outputs, n_inputs)``."""
+    z = np.exp(2j * np.pi * np.asarray(frequency, float) * period)
+    x = lam * period
+    small = np.abs(x) < 1e-4
+    safe = np.where(small, 1.0, x)
+    mu = np.exp(x)
+    g0 = np.where(small, period * (1 + x / 2 + x * x / 6), (mu - 1) / safe * period)
+    g1 = np.where(small, period * (0.5 + x / 6 + x * x / 24),
+                  (mu - 1 - x) / (safe * safe) * period)
+    if hold != "foh":
+        g1 = np.zeros_like(g1)
+    modal_b = np.linalg.solve(vectors, b.astype(complex))
+    modal_c = c @ vectors
+    weights = (g0[:, None] + (z[:, None] - 1) * g1[:, None]) / (z[:, None] - mu[:, None])
+    return np.stack([(weights * modal_c[:, None, i]) @ modal_b
+                     for i in range(modal_c.shape[1])], 2) + d[:, None]
+
+
 __all__ = ["BestLinearApproximation", "best_linear_approximation",
-           "discrete_frequency_response", "HANN_OVERLAP_INFLATION"]
+           "discrete_frequency_response", "modal_frequency_responses", "HANN_OVERLAP_INFLATION"]
