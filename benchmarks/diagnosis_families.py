@@ -193,7 +193,8 @@ def run_case(spec: effect_plants.CaseSpec, raw_options: Mapping[str, str],
                       remaining_significant=bool(result.remaining_gap.get("significant")),
                       systematic_before=_systematic(result.gap),
                       systematic_after=_systematic(result.remaining_gap),
-                      summary=result.summary)
+                      summary=result.summary,
+                      black_box_validation=(result.adequacy or {}).get("black_box_validation_fit"))
     except Exception as error:  # a failed case is recorded, never lost
         record.update(error=f"{type(error).__name__}: {error}",
                       traceback=traceback.format_exc(limit=-4).splitlines())

@@ -349,10 +349,11 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
         say("diagnose: nominal " + result.details["global_fit"]["verdict"])
     before, analysis_before, gap, fit_before = _where(model, validation, roles, say)
     nominal_model = model
+    linear_level = black_box_validation(adequacy, validation)
     with trial_pool(resolve_workers(options.workers), executor) as pool:
         model, current, rounds, steps, accepted = _search(
             model, before, candidates, Search(train, validation, roles, options, fit_options, say,
-                                              black_box_validation(adequacy, validation)), pool)
+                                              linear_level), pool)
         remaining_gap = _gap(model, validation, current, roles) if steps else gap
         fit_after = fit_per_output(validation, current)
         challenger = challenge(nominal_model, train, validation, fit_before, fit_after,
@@ -392,7 +393,9 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
         where, tuple(rounds), tuple(steps), summary, time.perf_counter() - started,
         tuple(analysis_before), tuple(analysis_after),
         {"time": validation.time, "measured": validation.outputs, "before": before,
-         "after": current}, adequacy.to_dict() if adequacy else None, hypothesis)
+         "after": current},
+        {**adequacy.to_dict(), "black_box_validation_fit": linear_level} if adequacy else None,
+        hypothesis)
 
 
 def _same_run(train: IdentificationData, validation: IdentificationData) -> bool:

@@ -80,6 +80,10 @@ def rank_candidates(model: Any, train: IdentificationData, roles: SignalRoles,
         on_masses, mass_paths = mass_friction(model, train)
         regressors["coulomb_friction"] = {**regressors["coulomb_friction"], **on_masses}
         paths.update(mass_paths)
+    if "cubic_stiffness" in regressors:
+        on_springs, spring_paths = spring_stiffening(model, train)
+        regressors["cubic_stiffness"] = {**regressors["cubic_stiffness"], **on_springs}
+        paths.update(spring_paths)
     best: dict[str, dict[str, Any]] = {}
     total: dict[str, float] = {}
     per_output = {}
@@ -191,28 +195,85 @@ def mass_friction(model: Any, train: IdentificationData
     that force on mass ``i`` (exact for inputs linear between samples). The measured position's
     velocity is mass ``n-1``'s on a three-mass oscillator (``y_cb``), not the frame's, and a
     force on a mass reaches the outputs only through the dynamics. Empty for other nominals."""
+    run = _oscillator_run(model, train)
+    if run is None:
+        return {}, {}
+    n = run.masses.size
+    regressors, paths = {}, {}
+    for i in range(n):
+        force = np.zeros((2 * n, 1))
+        force[n + i, 0] = 1.0 / run.masses[i]
+        for label, (x, setting) in friction_regressors(run.states[:, n + i]).items():
+            key = label.replace("(v", f"(v{i + 1}", 1)
+            regressors[key] = (x, {**setting, "mass": i + 1})
+            paths[("coulomb_friction", key)] = run.path(force, x)
+    return regressors, paths
+
+
+def spring_stiffening(model: Any, train: IdentificationData
+                      ) -> tuple[dict[str, tuple[np.ndarray, dict]], dict[tuple[str, str], np.ndarray]]:
+    """A hardening or softening spring of an oscillator nominal (the inside form fits a cubic
+    term on every chain spring): the regressor ``(d_i - d_i0)^3`` of the nominal's own simulated
+    deflection of spring ``i`` (base-1, 1-2, ...; ``d_i0`` at the run's first sample, the
+    operating point) and its path to the outputs, the response of the nominal's linear dynamics to
+    that spring's force (pulling mass ``i`` and, above the base, mass ``i-1`` the other way). A
+    spring's force follows its deflection, which no measured position is when the data measure
+    only the contact force or a position the spring does not span. Empty for other nominals and
+    for an oscillator that holds cubic springs already."""
+    run = None if getattr(_bare_nominal(model.structure), "cubic", False) else \
+        _oscillator_run(model, train)
+    if run is None:
+        return {}, {}
+    n = run.masses.size
+    deflections = np.diff(run.states[:, :n], axis=1, prepend=0.0)
+    regressors, paths = {}, {}
+    for i in range(n):
+        force = np.zeros((2 * n, 1))
+        force[n + i, 0] = -1.0 / run.masses[i]
+        if i > 0:
+            force[n + i - 1, 0] = 1.0 / run.masses[i - 1]
+        x = (deflections[:, i] - deflections[0, i]) ** 3
+        key = f"d{i + 1}^3"
+        regressors[key] = (x, {"spring": i + 1})
+        paths[("cubic_stiffness", key)] = run.path(force, x)
+    return regressors, paths
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class _OscillatorRun:
+    """A linear oscillator nominal's free run on the training run: its states ``[z; z']``, its
+    ``A``, the output rows of its ``C`` for the data's outputs, the masses and the hold."""
+
+    states: np.ndarray
+    a: np.ndarray
+    c: np.ndarray
+    masses: np.ndarray
+    period: float
+    hold: str
+
+    def path(self, force: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """The outputs of the linear dynamics from rest, driven by ``force * x(t)`` (exact for
+        `x` linear between samples with ``hold="foh"``)."""
+        phi, gamma0, gamma1 = discretise(self.a, force, self.period, self.hold)
+        drive = x[:-1, None] @ gamma0.T + np.diff(x)[:, None] @ gamma1.T
+        return propagate(phi, drive, np.zeros(self.a.shape[0])) @ self.c.T
+
+
+def _oscillator_run(model: Any, train: IdentificationData) -> _OscillatorRun | None:
+    """The :class:`_OscillatorRun` of `model`'s nominal, None when it is not a friction-free
+    oscillator or cannot run."""
     inner = _bare_nominal(model.structure)
     if not isinstance(inner, OscillatorStructure) or inner.friction:
-        return {}, {}
+        return None
     values = {k: v for k, v in model.parameters.items() if k in inner.parameter_names}
     try:
         states = inner.states(values, train)
         a, _, c, _ = inner.matrices(values)
-        masses = [inner.values(values)[f"m{i + 1}"] for i in range(inner.masses)]
+        masses = np.array([inner.values(values)[f"m{i + 1}"] for i in range(inner.masses)])
     except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError):
-        return {}, {}
-    n, rows = inner.masses, [OUTPUT_NAMES.index(o) for o in train.output_names]
-    regressors, paths = {}, {}
-    for i in range(n):
-        force = np.zeros((2 * n, 1))
-        force[n + i, 0] = 1.0 / masses[i]
-        phi, gamma0, gamma1 = discretise(a, force, train.sample_period, inner.hold)
-        for label, (x, setting) in friction_regressors(states[:, n + i]).items():
-            drive = x[:-1, None] @ gamma0.T + np.diff(x)[:, None] @ gamma1.T
-            key = label.replace("(v", f"(v{i + 1}", 1)
-            regressors[key] = (x, {**setting, "mass": i + 1})
-            paths[("coulomb_friction", key)] = propagate(phi, drive, np.zeros(2 * n)) @ c[rows].T
-    return regressors, paths
+        return None
+    rows = [OUTPUT_NAMES.index(o) for o in train.output_names]
+    return _OscillatorRun(states, a, c[rows], masses, train.sample_period, inner.hold)
 
 
 #: Smallest error-reduction ratio for a candidate to be refitted at all.
@@ -320,4 +381,5 @@ def input_paths(model: Any, data: IdentificationData,
     return out
 
 
-__all__ = ["rank_candidates", "input_paths", "head_signal", "MIN_ERR", "PATH_BUDGET"]
+__all__ = ["rank_candidates", "input_paths", "head_signal", "mass_friction",
+           "spring_stiffening", "MIN_ERR", "PATH_BUDGET"]
