@@ -93,7 +93,7 @@ def test_where_the_linkage_cannot_close_the_python_path_raises(kernel):
         lin.linkage_angles(p0, far)
     assert kernel.balance(p0, far, INPUTS) is None
     with pytest.raises(IdentificationError, match="cannot close"):
-        lin._balance(p0, far, INPUTS, kernel)
+        lin._balance_at(p0, INPUTS, kernel)(far)
     assert kernel.balance(p0[:-1], far, INPUTS) is None  # wrong length: the Python path
 
 

@@ -22,6 +22,10 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
+try:  # numpy's own LAPACK gufuncs (private: np.linalg.solve itself when absent)
+    from numpy.linalg import _umath_linalg
+except ImportError:  # pragma: no cover - every numpy since 1.8 has it
+    _umath_linalg = None
 
 from panto.fmu_src.parameters import ParameterSet
 from panto.fmu_src.spec import ParameterSpec
@@ -135,15 +139,21 @@ def linkage_angles(p: Sequence[float], q: Sequence[float]) -> list[float]:
     return [phi2, f["phi3"](p, q, phi2)]
 
 
-def _balance(p, q, u, kernel: static_kernel.StaticKernel | None = None
-             ) -> tuple[np.ndarray, np.ndarray]:
-    """``(r, dr/dq)`` at rest: by `kernel` (:func:`compiled`) where given and where it answers,
-    else by the Python functions (which raise where the linkage cannot close)."""
-    found = None if kernel is None else kernel.balance(p, q, u)
-    if found is not None:
-        return found
-    r, drdq = static_functions()["balance"](p, q, u, linkage_angles(p, q))
-    return np.array(r, float).ravel(), np.array(drdq, float)
+def _balance_at(p, u, kernel: static_kernel.StaticKernel | None = None
+                ) -> Callable[[Sequence[float]], tuple[np.ndarray, np.ndarray]]:
+    """``q -> (r, dr/dq)`` at rest for the parameters `p` and inputs `u`: by `kernel`
+    (:func:`compiled`; its ``balance_at``, `p` and `u` written once) where given and where it
+    answers, else by the Python functions (which raise where the linkage cannot close)."""
+    at = None if kernel is None else kernel.balance_at(p, u)
+    function = static_functions()["balance"]
+
+    def balance(q) -> tuple[np.ndarray, np.ndarray]:
+        found = None if at is None else at(q)
+        if found is not None:
+            return found
+        r, drdq = function(p, q, u, linkage_angles(p, q))
+        return np.array(r, float).ravel(), np.array(drdq, float)
+    return balance
 
 
 def solve_equilibrium(p: np.ndarray, u: Sequence[float], start: np.ndarray | None = None,
@@ -153,6 +163,12 @@ def solve_equilibrium(p: np.ndarray, u: Sequence[float], start: np.ndarray | Non
 
     Raises :class:`IdentificationError` when no equilibrium is found.
     """
+    return _settle(p, u, start, tolerance)[0]
+
+
+def _settle(p: np.ndarray, u: Sequence[float], start: np.ndarray | None = None,
+            tolerance: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`solve_equilibrium`'s ``q0`` and ``dr/dq`` there (Newton's last balance)."""
     for guess in ([start] if start is not None else []) + [None]:
         q = initial_guess(p, u) if guess is None else np.array(guess, float)
         try:
@@ -163,30 +179,51 @@ def solve_equilibrium(p: np.ndarray, u: Sequence[float], start: np.ndarray | Non
                               "with these parameters")
 
 
-def _newton(p, u, q, tolerance: float) -> np.ndarray:
-    kernel = compiled()
-    r, jac = _balance(p, q, u, kernel)
+def _newton(p, u, q, tolerance: float) -> tuple[np.ndarray, np.ndarray]:
+    balance = _balance_at(p, u, compiled())
+    r, jac = balance(q)
     scale = max(1.0, float(np.max(np.abs(r))), abs(p[INDEX["k_p"]] * u[1]))
+    norm = _norm(r)
     for _ in range(50):
-        step = np.linalg.solve(jac, -r)
-        lam, norm = 1.0, _norm(r)
+        step = _linear_solve(jac, -r)
+        lam = 1.0
         while True:  # backtracking keeps the linkage closed and the residual falling
             try:
-                r_new, jac_new = _balance(p, q + lam * step, u, kernel)
-                if _norm(r_new) < norm or lam < 1e-3:
+                trial = q + lam * step
+                r_new, jac_new = balance(trial)
+                norm_new = _norm(r_new)
+                if norm_new < norm or lam < 1e-3:
                     break
             except IdentificationError:
                 pass
             lam *= 0.5
             if lam < 1e-4:
                 raise IdentificationError("Newton step left the admissible configurations")
-        q, r, jac = q + lam * step, r_new, jac_new
+        q, r, jac, norm = trial, r_new, jac_new, norm_new
         # max |r| <= bound and max |lam step| < 1e-9, element by element (a NaN fails both ways)
         bound = tolerance * scale
         if all(abs(x) <= bound for x in r.tolist()) and \
                 all(abs(lam * s) < 1e-9 for s in step.tolist()):
-            return q
+            return q, jac
     raise IdentificationError("Newton's method did not converge to an equilibrium")
+
+
+def _linear_solve(matrix: np.ndarray, right: np.ndarray) -> np.ndarray:
+    """``np.linalg.solve(matrix, right)`` of a float square `matrix` and a float vector or
+    matrix `right`: its LAPACK gufunc under its error state (a singular `matrix` raises
+    :class:`numpy.linalg.LinAlgError`), without its dispatch and checks (Newton solves some
+    180 000 3 x 3 systems in one mapping of the data, ``initial_from_data``)."""
+    if _umath_linalg is None:  # pragma: no cover
+        return np.linalg.solve(matrix, right)
+    solve = _umath_linalg.solve1 if right.ndim == 1 else _umath_linalg.solve
+    with np.errstate(call=_singular, invalid="call", over="ignore", divide="ignore",
+                     under="ignore"):
+        return solve(matrix, right, signature="dd->d")
+
+
+def _singular(error: str, flag: int) -> None:
+    """The error callback of :func:`_linear_solve`: numpy's own for ``np.linalg.solve``."""
+    raise np.linalg.LinAlgError("Singular matrix")
 
 
 def _norm(r: np.ndarray) -> float:
@@ -233,13 +270,14 @@ def linearise(p: np.ndarray, u0: Sequence[float], start: np.ndarray | None = Non
     mass, drdv, drdu, h, dhdq, dhdv, dhdu = found if found is not None else (
         np.array(a, float) for a in static_functions()["linear"](p, q0, u0, linkage_angles(p, q0)))
     n = len(q0)
-    solved = np.linalg.solve(mass, np.hstack([drdq, drdv, drdu]))  # numpy: no BLAS threads
+    solved = _linear_solve(mass, np.concatenate([drdq, drdv, drdu], axis=1))  # no BLAS threads
     a = np.zeros((2 * n, 2 * n))
     a[:n, n:] = np.eye(n)
     a[n:] = solved[:, :2 * n]
     b = np.zeros((2 * n, drdu.shape[1]))
     b[n:] = solved[:, 2 * n:]
-    return a, b, np.hstack([dhdq, dhdv]), dhdu, np.concatenate([q0, np.zeros(n)]), h.ravel()
+    return (a, b, np.concatenate([dhdq, dhdv], axis=1), dhdu, np.concatenate([q0, np.zeros(n)]),
+            h.ravel())
 
 
 #: Recent equilibria of :func:`linearise` by what they depend on (:func:`_equilibrium`).
@@ -258,8 +296,7 @@ def _equilibrium(p: np.ndarray, u0: Sequence[float], start: np.ndarray | None
            None if start is None else np.asarray(start, float).tobytes())
     found = _EQUILIBRIA.pop(key, None)
     if found is None:
-        q0 = solve_equilibrium(p, u0, start)
-        found = (q0, _balance(p, q0, u0, compiled())[1])
+        found = _settle(p, u0, start)
         for array in found:
             array.setflags(write=False)
         while len(_EQUILIBRIA) >= _EQUILIBRIA_KEPT:

@@ -45,6 +45,7 @@ go to the model's parameter file.
 from __future__ import annotations
 
 import math
+import weakref
 from functools import lru_cache
 from typing import Any, Mapping, NamedTuple, Sequence
 
@@ -231,16 +232,24 @@ class PhysicalLinear(_PhysicalBase):
         """Continuous ``(A, B, C, D)`` from `data`'s inputs to `data`'s outputs (their units),
         linearised about the operating point of `data` (``operating_point``). The input delay
         ``eta_delay`` is not part of it."""
-        u = self.model_inputs(parameters, data)
-        u0 = u.mean(axis=0) if self.operating_point == "mean" else u[0]
-        a, b, c, d, _, _ = self.linear_model(parameters, u0)
-        missing = [n for n in (*data.input_names, *data.output_names)
-                   if n not in INPUT_NAMES + OUTPUT_NAMES]
-        if missing:
-            raise IdentificationError(f"{self.name}: no signal(s) {missing}")
-        inputs = [INPUT_NAMES.index(n) for n in data.input_names]
-        rows = [OUTPUT_NAMES.index(n) for n in data.output_names]
-        return a, b[:, inputs], c[rows], d[np.ix_(rows, inputs)]
+        a, b, c, d, _, _ = self.linear_model(parameters, self._operating_point(parameters, data))
+        inputs, rows, both = _signals(self.name, data.input_names, data.output_names)
+        return a, b[:, inputs], c[rows], d[both]
+
+    def _operating_point(self, parameters: Mapping[str, float], data: IdentificationData
+                         ) -> np.ndarray:
+        """The inputs ``(eta, p)`` linearised about (``operating_point``) of
+        :meth:`model_inputs`, remembered per record, input delay and rule
+        (:data:`_OPERATING_POINTS`): they depend on no other parameter, and the record's arrays
+        are read-only."""
+        key = (float(parameters.get(DELAY, self.eta_delay)), self.operating_point)
+        remembered = _OPERATING_POINTS.setdefault(data, {})
+        if key not in remembered:
+            u = self.model_inputs(parameters, data)
+            u0 = u.mean(axis=0) if self.operating_point == "mean" else u[0].copy()
+            u0.setflags(write=False)
+            remembered[key] = u0
+        return remembered[key]
 
     def deviation_model(self, parameters: Mapping[str, float], data: IdentificationData
                         ) -> tuple[np.ndarray, ...]:
@@ -295,6 +304,25 @@ class DiscreteLinear(NamedTuple):
         if not np.all(np.isfinite(y)) or np.max(np.abs(np.linalg.eigvals(self.phi))) > 1.0 + 1e-9:
             raise IdentificationError(f"{name}: unstable linearisation")
         return y
+
+
+@lru_cache(maxsize=16)
+def _signals(name: str, input_names: tuple[str, ...], output_names: tuple[str, ...]
+             ) -> tuple[list[int], list[int], tuple[np.ndarray, np.ndarray]]:
+    """The model's input columns and output rows of a record's signals and ``np.ix_`` of both
+    (:meth:`PhysicalLinear.linear_system`); raises for a signal the model lacks."""
+    missing = [n for n in (*input_names, *output_names) if n not in INPUT_NAMES + OUTPUT_NAMES]
+    if missing:
+        raise IdentificationError(f"{name}: no signal(s) {missing}")
+    inputs = [INPUT_NAMES.index(n) for n in input_names]
+    rows = [OUTPUT_NAMES.index(n) for n in output_names]
+    return inputs, rows, np.ix_(rows, inputs)
+
+
+#: The operating points of :meth:`PhysicalLinear.linear_system` by record (as long as it lives),
+#: then by input delay and rule.
+_OPERATING_POINTS: weakref.WeakKeyDictionary[IdentificationData, dict[tuple, np.ndarray]] = \
+    weakref.WeakKeyDictionary()
 
 
 @lru_cache(maxsize=64)

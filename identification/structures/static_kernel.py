@@ -302,9 +302,31 @@ class StaticKernel:
 
     def balance(self, p, q, u) -> tuple[np.ndarray, np.ndarray] | None:
         """``(r, dr/dq)`` at rest, or None where the Python path must run (module notes)."""
-        n = self.sizes[1]
-        out = self._call("balance", p, q, u, n + n * n)
-        return None if out is None else (out[:n].copy(), out[n:].reshape(n, n).copy())
+        at = self.balance_at(p, u)
+        return None if at is None else at(q)
+
+    def balance_at(self, p, u
+                   ) -> Callable[[Sequence[float]], tuple[np.ndarray, np.ndarray] | None] | None:
+        """``q -> balance(p, q, u)``, `p` and `u` written once into the buffer it reuses (a
+        Newton solve balances some twenty times at the same `p` and `u`), or None where their
+        lengths are not the kernel's."""
+        n_p, n_q, n_u = self.sizes
+        if len(p) != n_p or len(u) != n_u:
+            return None
+        buffer = np.empty(n_p + n_q + n_u + n_q + n_q * n_q)
+        buffer[:n_p], buffer[n_p + n_q:n_p + n_q + n_u] = p, u
+        coordinates = buffer[n_p:n_p + n_q]
+        r, drdq = buffer[-n_q - n_q * n_q:-n_q * n_q], buffer[-n_q * n_q:].reshape(n_q, n_q)
+        address = buffer.ctypes.data
+        arguments = (address, address + 8 * (n_p + n_q + n_u))
+        function = self._functions["balance"]
+
+        def balance(q) -> tuple[np.ndarray, np.ndarray] | None:
+            if len(q) != n_q:
+                return None
+            coordinates[:] = q
+            return (r.copy(), drdq.copy()) if function(*arguments) == 0 else None
+        return balance
 
     def linear(self, p, q, u) -> list[np.ndarray] | None:
         """``(M, dr/dv, dr/du, h, dh/dq, dh/dv, dh/du)`` at rest, or None (module notes)."""
