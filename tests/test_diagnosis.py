@@ -72,7 +72,10 @@ def test_hidden_cubic_spring_is_named_and_closes_the_gap():
     assert any("diagnose: verdict" in line for line in lines)
 
 
-def test_hidden_input_delay_is_named_with_its_delay():
+def test_hidden_input_delay_is_named_with_its_delay_and_the_search_stops_there():
+    """The delay is the only effect: once it is in the model the validation residual is within
+    the noise, and no second round ranks and refits candidates on it (a second effect would be
+    named on the noise's chance structure)."""
     delay = 6
     def delayed(force):
         return np.r_[np.zeros(delay), force[:-delay]]
@@ -83,6 +86,9 @@ def test_hidden_input_delay_is_named_with_its_delay():
     assert result.verdict == "effect" and result.effects[0] == "input_delay", lines
     assert result.steps[0].parameters["input_delay:F"] == pytest.approx(delay * DT, abs=0.3 * DT)
     assert result.fit_after["x"] > result.fit_before["x"] + 5.0
+    assert result.effects == ("input_delay",) and not result.remaining_gap["significant"], lines
+    assert len(result.rounds) == 1 and DiagnosisOptions().max_effects > 1, lines
+    assert any("leave is within the noise; stop" in line for line in lines), lines
 
 
 def test_no_hidden_effect_gives_none():

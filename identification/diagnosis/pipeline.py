@@ -47,7 +47,9 @@ causes it, and how far the gap shrinks once that effect is in the model.
    (:func:`~panto.identification.diagnosis.choice.choose_converged`): the chosen effect's
    parameters, the gap it closes and the next round's start are those of its optimum, and each
    step says how its refit ended (``Step.refit``; the report warns when it did not converge).
-   The search repeats on what remains (``max_effects``). Beside the refits, every round tries
+   The search repeats on what remains (``max_effects``) while the gap the accepted effects
+   leave on the validation run is significant (the test of step 2 on their model's free run: a
+   residual within the noise has nothing left to name). Beside the refits, every round tries
    ``offset`` *between the
    runs* (a sensor re-zeroed, a preload moved between them; the training run cannot show it):
    measured on the withheld run's first fold, judged on the others by the same validation tests
@@ -351,10 +353,10 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
     nominal_model = model
     linear_level = black_box_validation(adequacy, validation)
     with trial_pool(resolve_workers(options.workers), executor) as pool:
-        model, current, rounds, steps, accepted = _search(
+        model, current, rounds, steps, accepted, left = _search(
             model, before, candidates, Search(train, validation, roles, options, fit_options, say,
                                               linear_level), pool)
-        remaining_gap = _gap(model, validation, current, roles) if steps else gap
+        remaining_gap = left or (_gap(model, validation, current, roles) if steps else gap)
         fit_after = fit_per_output(validation, current)
         challenger = challenge(nominal_model, train, validation, fit_before, fit_after,
                                executor, progress, pool, options.max_evaluations) \
@@ -436,14 +438,23 @@ def _where(model: Model, validation: IdentificationData, roles: SignalRoles, say
 
 def _search(model: Model, before: np.ndarray, candidates: Sequence[str], search: Search,
             pool: Any = None):
-    """Rounds of rank, refit and judge until no candidate passes (module notes, step 3); a
-    round's refits on `pool` (:func:`~panto.identification.diagnosis.parallel.map_trials`)."""
+    """Rounds of rank, refit and judge until no candidate passes or the gap the accepted effects
+    leave is within the noise (:func:`_gap` on the validation run: nothing left to name; module
+    notes, step 3); a round's refits on `pool`
+    (:func:`~panto.identification.diagnosis.parallel.map_trials`). Returns the model, its free run
+    on the validation run, the rounds, steps and accepted effects, and the gap left by the last
+    accepted effect when it was tested (else None)."""
     train, validation, roles, options = search.train, search.validation, search.roles, \
         search.options
     say = search.say
     rounds, steps, accepted = [], [], []
-    current = before
+    current, left = before, None
     for round_index in range(options.max_effects):
+        if steps:
+            left = _gap(model, validation, current, roles)
+            if not left["significant"]:
+                say("diagnose: the gap the accepted effects leave is within the noise; stop")
+                break
         remaining = [c for c in candidates if c not in accepted]
         ranking = rank_candidates(model, train, roles, remaining, options.max_refits)
         ranking["top"] += _predicted_contact_loss(ranking["top"], remaining, roles, validation,
@@ -472,12 +483,12 @@ def _search(model: Model, before: np.ndarray, candidates: Sequence[str], search:
             if search.validation_shift is not None:
                 shift = shift + search.validation_shift
             search = dataclasses.replace(search, validation_shift=shift)
-        model, current = new_model, simulated
+        model, current, left = new_model, simulated, None
         if trial.evidence:  # its free run need not follow the record sample by sample
             say("diagnose: stop: the next candidates' withheld gains would be measured against "
                 "a free run that does not follow the record sample by sample")
             break
-    return model, current, rounds, steps, accepted
+    return model, current, rounds, steps, accepted, left
 
 
 def _between_runs(model: Model, current: np.ndarray, remaining: Sequence[str],
