@@ -326,7 +326,7 @@ def test_stacked_modal_responses_are_the_single_ones_bit_for_bit_or_left_to_them
                 np.array([[1.0, 0.2]]), np.array([[0.0, 0.1]]))
 
     resonant = [system([[0.0, 1.0], [-400.0, -4.0]]), system([[0.0, 1.0], [-900.0, -2.0]])]
-    overdamped = system([[-3.0, 0.0], [1.0, -50.0]])  # real eigenvalues
+    overdamped = system([[-3.1, 0.71], [1.37, -49.3]])  # real eigenvalues
     unstable = system([[0.0, 1.0], [-400.0, 3.0]])
     defective = system([[-5.0, 1.0], [0.0, -5.0]])  # a Jordan block: the matrix exponential
     frequency = np.linspace(0.5, 80.0, 40)
@@ -339,9 +339,10 @@ def test_stacked_modal_responses_are_the_single_ones_bit_for_bit_or_left_to_them
     assert [r is None for r in stacked] == [False, True, True, True, False]
     for k in (0, 4):
         assert np.array_equal(stacked[k], single(mixed[k]))
-    real = modal_frequency_responses([overdamped, overdamped], frequency, 1 / RATE, "zoh")
-    assert np.array_equal(real[1], discrete_frequency_response(overdamped, frequency, 1 / RATE,
-                                                               "zoh"))
+    # real eigenvalues only: left to the single call too (a stack of their eigenvectors
+    # multiplies in another order than the single call's strided view: other last bits)
+    assert modal_frequency_responses([overdamped, overdamped], frequency, 1 / RATE,
+                                     "zoh") == [None, None]
 
 
 def test_the_polish_evaluates_its_jacobian_columns_together_with_the_same_result(monkeypatch):

@@ -197,9 +197,11 @@ def modal_frequency_responses(systems: Sequence[Sequence[np.ndarray]], frequency
     -------
     list of ndarray or None
         The response of each system, or None where :func:`discrete_frequency_response` must
-        answer: a defective, unstable (with `stable`) or non-finite ``A``, or one with real
-        eigenvalues among systems with complex ones (numpy's stacked ``eig`` returns them as
-        complex numbers, which the single call does not).
+        answer: a defective, unstable (with `stable`) or non-finite ``A``, one with real
+        eigenvalues only (numpy's stacked ``eig`` returns them as complex numbers among systems
+        with complex ones, which the single call does not; alone, its real eigenvectors come as
+        a strided view that a stack copies, and the product ``C V`` of one output row then sums
+        in another order).
     """
     matrices = [_matrices(system) for system in systems]
     if not matrices or len({tuple(x.shape for x in m) for m in matrices}) > 1:
@@ -212,8 +214,9 @@ def modal_frequency_responses(systems: Sequence[Sequence[np.ndarray]], frequency
     take = np.linalg.cond(vectors) < 1e8
     if stable:
         take &= np.max(lam.real, axis=1) < 0
-    if np.iscomplexobj(lam):
-        take &= np.any(lam.imag != 0, axis=1)
+    if not np.iscomplexobj(lam):
+        return [None] * len(matrices)
+    take &= np.any(lam.imag != 0, axis=1)
     responses: list[np.ndarray | None] = [None] * len(matrices)
     if take.any():
         for k, response in zip(np.flatnonzero(take), _modal_responses(

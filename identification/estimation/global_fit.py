@@ -235,10 +235,14 @@ class _ReducedCost:
         the ``workers`` of ``least_squares``, which passes the points of a finite-difference
         Jacobian and `function`, this cost wrapped (not called)."""
         problem = self.frequency_problem
+        points = list(points)
         systems = [self._system(x) for x in points]
-        modal = iter(modal_frequency_responses([s for s in systems if s is not None],
-                                               problem.frequency, problem.period, problem.hold,
-                                               stable=True))
+        try:
+            modal = iter(modal_frequency_responses([s for s in systems if s is not None],
+                                                   problem.frequency, problem.period,
+                                                   problem.hold, stable=True))
+        except _FAILURES:  # the stack failed as a whole: one by one, as without it
+            return [self(x) for x in points]
         return [self._checked(None if system is None else self._weighted(system, next(modal)))
                 for system in systems]
 
