@@ -22,10 +22,11 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
-try:  # numpy's own LAPACK gufuncs (private: np.linalg.solve itself when absent)
+try:  # numpy's own LAPACK gufuncs (private: np.linalg.solve itself where absent or renamed)
     from numpy.linalg import _umath_linalg
 except ImportError:  # pragma: no cover - every numpy since 1.8 has it
     _umath_linalg = None
+_SOLVE, _SOLVE1 = (getattr(_umath_linalg, name, None) for name in ("solve", "solve1"))
 
 from panto.fmu_src.parameters import ParameterSet
 from panto.fmu_src.spec import ParameterSpec
@@ -213,9 +214,9 @@ def _linear_solve(matrix: np.ndarray, right: np.ndarray) -> np.ndarray:
     matrix `right`: its LAPACK gufunc under its error state (a singular `matrix` raises
     :class:`numpy.linalg.LinAlgError`), without its dispatch and checks (Newton solves some
     180 000 3 x 3 systems in one mapping of the data, ``initial_from_data``)."""
-    if _umath_linalg is None:  # pragma: no cover
+    if _SOLVE is None or _SOLVE1 is None:  # pragma: no cover
         return np.linalg.solve(matrix, right)
-    solve = _umath_linalg.solve1 if right.ndim == 1 else _umath_linalg.solve
+    solve = _SOLVE1 if right.ndim == 1 else _SOLVE
     with np.errstate(call=_singular, invalid="call", over="ignore", divide="ignore",
                      under="ignore"):
         return solve(matrix, right, signature="dd->d")

@@ -240,14 +240,17 @@ class PhysicalLinear(_PhysicalBase):
                          ) -> np.ndarray:
         """The inputs ``(eta, p)`` linearised about (``operating_point``) of
         :meth:`model_inputs`, remembered per record, input delay and rule
-        (:data:`_OPERATING_POINTS`): they depend on no other parameter, and the record's arrays
-        are read-only."""
+        (:data:`_OPERATING_POINTS`, the last :data:`_OPERATING_POINTS_KEPT` per record: a free
+        delay gives a new one at every evaluation): they depend on no other parameter, and the
+        record's arrays are read-only."""
         key = (float(parameters.get(DELAY, self.eta_delay)), self.operating_point)
         remembered = _OPERATING_POINTS.setdefault(data, {})
         if key not in remembered:
             u = self.model_inputs(parameters, data)
             u0 = u.mean(axis=0) if self.operating_point == "mean" else u[0].copy()
             u0.setflags(write=False)
+            while len(remembered) >= _OPERATING_POINTS_KEPT:
+                remembered.pop(next(iter(remembered)))
             remembered[key] = u0
         return remembered[key]
 
@@ -320,9 +323,13 @@ def _signals(name: str, input_names: tuple[str, ...], output_names: tuple[str, .
 
 
 #: The operating points of :meth:`PhysicalLinear.linear_system` by record (as long as it lives),
-#: then by input delay and rule.
+#: then by input delay and rule. Keyed by the record itself: :class:`IdentificationData` hashes by
+#: identity (``eq=False``) and makes its arrays read-only (a record built on a view of an array
+#: its caller then writes to would leave a stale operating point here).
 _OPERATING_POINTS: weakref.WeakKeyDictionary[IdentificationData, dict[tuple, np.ndarray]] = \
     weakref.WeakKeyDictionary()
+#: Operating points kept per record (input delays, rules).
+_OPERATING_POINTS_KEPT = 16
 
 
 @lru_cache(maxsize=64)
