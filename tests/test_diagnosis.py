@@ -97,6 +97,10 @@ def test_no_hidden_effect_gives_none():
     assert result.verdict == "none", lines
     assert result.effects == ()
     assert not result.gap["significant"]
+    # the adequacy's linear black box on the withheld run: as good as the exact nominal there
+    level = result.adequacy["black_box_validation_fit"]
+    assert set(level) == {"x"} and abs(level["x"] - result.fit_before["x"]) < 1.0, (
+        level, result.fit_before)
 
 
 def test_out_of_library_effect_is_not_confidently_misnamed():

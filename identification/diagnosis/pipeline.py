@@ -162,7 +162,8 @@ class Diagnosis:
     series: Mapping[str, np.ndarray] = field(default_factory=dict, repr=False)
     adequacy: Mapping[str, Any] | None = None
     """The nominal beside a black box on training (:mod:`~panto.identification.structures.adequacy`),
-    when :attr:`DiagnosisOptions.adequacy` asked for it."""
+    when :attr:`DiagnosisOptions.adequacy` asked for it, with ``black_box_validation_fit``: the
+    black box's free-run fit [%] on the validation run per output (None where it cannot run)."""
     discovery: Mapping[str, Any] | None = None
     """When the verdict is ``unexplained``: the best term of the discovery library
     (:func:`~panto.identification.diagnosis.discovery.discover`) refitted in the nominal, with its
@@ -356,7 +357,8 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
         model, current, rounds, steps, accepted, left = _search(
             model, before, candidates, Search(train, validation, roles, options, fit_options, say,
                                               linear_level), pool)
-        remaining_gap = left or (_gap(model, validation, current, roles) if steps else gap)
+        remaining_gap = left if left is not None else (
+            _gap(model, validation, current, roles) if steps else gap)
         fit_after = fit_per_output(validation, current)
         challenger = challenge(nominal_model, train, validation, fit_before, fit_after,
                                executor, progress, pool, options.max_evaluations) \

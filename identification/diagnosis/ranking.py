@@ -211,15 +211,18 @@ def mass_friction(model: Any, train: IdentificationData
 
 
 def spring_stiffening(model: Any, train: IdentificationData
-                      ) -> tuple[dict[str, tuple[np.ndarray, dict]], dict[tuple[str, str], np.ndarray]]:
+                      ) -> tuple[dict[str, tuple[np.ndarray, dict]],
+                                 dict[tuple[str, str], np.ndarray]]:
     """A hardening or softening spring of an oscillator nominal (the inside form fits a cubic
     term on every chain spring): the regressor ``(d_i - d_i0)^3`` of the nominal's own simulated
     deflection of spring ``i`` (base-1, 1-2, ...; ``d_i0`` at the run's first sample, the
     operating point) and its path to the outputs, the response of the nominal's linear dynamics to
     that spring's force (pulling mass ``i`` and, above the base, mass ``i-1`` the other way). A
     spring's force follows its deflection, which no measured position is when the data measure
-    only the contact force or a position the spring does not span. Empty for other nominals and
-    for an oscillator that holds cubic springs already."""
+    only the contact force or a position the spring does not span. Empty for other nominals, for
+    an oscillator that holds cubic springs already, and for one with friction (once
+    ``coulomb_friction`` is accepted a cubic spring is ranked from the measured position's cube
+    alone, as :func:`mass_friction` is empty there)."""
     run = None if getattr(_bare_nominal(model.structure), "cubic", False) else \
         _oscillator_run(model, train)
     if run is None:
