@@ -31,7 +31,6 @@ import os
 import platform
 import subprocess
 import sys
-import tempfile
 import time
 import types
 from datetime import datetime, timezone
@@ -42,6 +41,9 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(ROOT / "docs" / "diagnosis"))
+sys.path.insert(0, str(HERE))
+
+from frequency_polish_speed import story_case  # noqa: E402  (the sibling benchmark)
 
 #: The commit before ``linear_system``'s shortcuts (operating point and signals remembered,
 #: the balance bound to a parameter set, numpy's solve without its wrapper).
@@ -71,18 +73,6 @@ def load_before(revision: str) -> dict[str, types.ModuleType]:
             sys.modules[f"{package.__name__}.{name}"] = module
             setattr(package, name, module)
     return old
-
-
-def story_case():
-    """The rig story's training run and the diagnosis' ``physical-linear`` structure."""
-    from rig_story import record
-
-    from panto.identification.diagnosis.support import build_structure
-
-    with tempfile.TemporaryDirectory() as tmp:
-        data = record(Path(tmp) / "t", "aprbs_training", 41, 25.0, effects=True)
-    structure, free = build_structure("physical-linear", data, {})
-    return structure, data, free
 
 
 def recorded_calls(structure, data, free) -> list[dict[str, float]]:
