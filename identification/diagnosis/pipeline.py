@@ -91,8 +91,10 @@ from panto.identification.diagnosis.nominal import (Progress, adequacy_quietly, 
                                                     black_box_validation, fit_nominal,
                                                     fit_per_output, indented, simulate)
 from panto.identification.diagnosis.parallel import map_trials, resolve_workers, trial_pool
+from panto.identification.diagnosis.augmentations import INPUT_SIDE
 from panto.identification.diagnosis.ranking import rank_candidates
-from panto.identification.diagnosis.refit import Model, Search, Trial, try_candidate
+from panto.identification.diagnosis.refit import (ADDS_DYNAMICS, LINEAR_SHORTFALL, Model, Search,
+                                                  Trial, lacks_linear_dynamics, try_candidate)
 from panto.identification.diagnosis.residual_analysis import (ErrorModelOptions, OutputAnalysis,
                                                              analyse_residuals)
 from panto.identification.diagnosis.residual_energy import jsonable
@@ -458,11 +460,17 @@ def _search(model: Model, before: np.ndarray, candidates: Sequence[str], search:
                 say("diagnose: the gap the accepted effects leave is within the noise; stop")
                 break
         remaining = [c for c in candidates if c not in accepted]
-        ranking = rank_candidates(model, train, roles, remaining, options.max_refits)
+        every = [c for c in ADDS_DYNAMICS if c in remaining] \
+            if lacks_linear_dynamics(search, current) else []
+        if every:
+            say(f"diagnose: round {round_index + 1}: the linear black box validates more than "
+                f"{LINEAR_SHORTFALL:g} points better: every candidate adding dynamics is refitted "
+                "on every input it can enter")
+        ranking = rank_candidates(model, train, roles, remaining, options.max_refits, every)
         ranking["top"] += _predicted_contact_loss(ranking["top"], remaining, roles, validation,
                                                   current)
         say(f"diagnose: round {round_index + 1}: ranked on the training residual: " +
-            (", ".join(f"{c['effect']} (ERR {c['err']:.3f})" for c in ranking["top"]) or
+            (", ".join(f"{_named(c)} (ERR {c['err']:.3f})" for c in ranking["top"]) or
              "no significant candidate"))
         trials = map_trials(try_candidate, model, ranking["top"], current, search, pool)
         trials, chosen = choice.choose_converged(
@@ -491,6 +499,14 @@ def _search(model: Model, before: np.ndarray, candidates: Sequence[str], search:
                 "a free run that does not follow the record sample by sample")
             break
     return model, current, rounds, steps, accepted, left
+
+
+def _named(candidate: Mapping[str, Any]) -> str:
+    """A ranked candidate's name, with the input it enters for an input-side effect
+    (``actuator_lag@p``)."""
+    where = candidate.get("setting", {}).get("input")
+    return f"{candidate['effect']}@{where}" if where and candidate["effect"] in INPUT_SIDE \
+        else candidate["effect"]
 
 
 def _between_runs(model: Model, current: np.ndarray, remaining: Sequence[str],

@@ -47,7 +47,8 @@ def _output_filter(structure: ModelStructure, parameters: Mapping[str, float], o
 
 
 def rank_candidates(model: Any, train: IdentificationData, roles: SignalRoles,
-                    candidates: Sequence[str], max_refits: int) -> dict[str, Any]:
+                    candidates: Sequence[str], max_refits: int,
+                    every: Sequence[str] = ()) -> dict[str, Any]:
     """FROLS ranking per output of the current model's training residual; the top candidates
     with start settings for their augmentation.
 
@@ -58,6 +59,11 @@ def rank_candidates(model: Any, train: IdentificationData, roles: SignalRoles,
     the nominal has partly absorbed shows a weak signature on the training residual (its
     projection on the nominal's sensitivities is removed) yet can still be the one that closes
     the gap once refitted in the model. Input-side effects count per input.
+
+    The effects in `every` are refitted whatever their ERR, each on every input it can enter
+    (its best variant there), after the `max_refits` (the search asks for this when the linear
+    black box shows dynamics the model lacks:
+    :func:`~panto.identification.diagnosis.refit.lacks_linear_dynamics`).
 
     A regressor is scored as it reaches the output: through the linear OE model's filter, or,
     for any other nominal, through the nominal's own response to the input it enters
@@ -101,7 +107,8 @@ def rank_candidates(model: Any, train: IdentificationData, roles: SignalRoles,
             continue
         per_output[output] = ranked.ranking.to_dict()
         for score in ranked.ranking.first_step:
-            if not score.err >= MIN_ERR:
+            kept = score.effect.split("@")[0] in every and np.isfinite(score.err)
+            if not (score.err >= MIN_ERR or kept):
                 continue
             key = score.effect
             score = dataclasses.replace(score, effect=score.effect.split("@")[0])
@@ -112,7 +119,11 @@ def rank_candidates(model: Any, train: IdentificationData, roles: SignalRoles,
     for key, candidate in best.items():
         candidate["err_total"] = total[key]
     top = sorted(best.values(), key=lambda c: (not c["significant"], -c["err_total"]))
-    return {"top": top[:max_refits], "per_output": per_output}
+    top = [c for c in top if c["err_total"] >= MIN_ERR or c["significant"]]
+    chosen = top[:max_refits]
+    chosen += [c for key, c in best.items() if key.split("@")[0] in every and
+               all(c is not other for other in chosen)]
+    return {"top": chosen, "per_output": per_output}
 
 
 def head_signal(model: Any, data: IdentificationData, roles: SignalRoles,

@@ -232,7 +232,14 @@ def _second_start_due(effect: str, search: Search, current: np.ndarray) -> bool:
     points on some output (the linear dynamics are not expressed yet)."""
     if effect in INSIDE:
         return True
-    if effect not in ADDS_DYNAMICS or search.linear_level is None:
+    return effect in ADDS_DYNAMICS and lacks_linear_dynamics(search, current)
+
+
+def lacks_linear_dynamics(search: Search, current: np.ndarray) -> bool:
+    """Whether the adequacy's linear black box validates better than the current model
+    (`current`: its free run on the validation run) by :data:`LINEAR_SHORTFALL` points on some
+    output: linear dynamics the data hold are not expressed yet (False without a black box)."""
+    if search.linear_level is None:
         return False
     fits = fit_per_output(search.validation, current)
     return any(level - fits[o] > LINEAR_SHORTFALL for o, level in search.linear_level.items()
