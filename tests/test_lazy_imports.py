@@ -3,7 +3,7 @@ what replaces them must agree with them. Cached functions run in the namespace l
 give them (fmu_src/numeric.py ``_namespace``); the pantograph's default parameters read from the
 cache of the static functions are the model's (linearisation.default_parameter_set); the
 compiled first-order filter of every mode (static_kernel.first_order_filter) gives
-scipy.signal.lfilter's values bit for bit, on random filters and on the physical-linear
+scipy.signal.lfilter's values bit for bit, its accumulation into the states NumPy's, on random filters and on the physical-linear
 structure's runs; and a process reading a warm cache runs the structure without either import."""
 from __future__ import annotations
 
@@ -71,6 +71,25 @@ def test_the_compiled_filter_is_lfilter_bit_for_bit():
                               _lfilter(lam, drive, z0)), trial
 
 
+def test_the_compiled_accumulation_is_numpys_bit_for_bit():
+    """``states += w (outer(Re z, Re v) - outer(Im z, Im v))`` by the compiled loop and by
+    NumPy, on random modes of every scale, onto states that already hold other modes."""
+    _compiled_filter()
+    rng = np.random.default_rng(6)
+    for trial in range(40):
+        rows, cols = int(rng.integers(1, 4000)), int(rng.integers(1, 25))
+        z = (rng.normal(size=rows) + 1j * rng.normal(size=rows)) * 10.0 ** rng.uniform(-8, 4)
+        v = rng.normal(size=cols) + 1j * rng.normal(size=cols) * (trial % 4 != 0)
+        weight = 2.0 if trial % 2 else 1.0
+        start = rng.normal(size=(rows, cols)) * 10.0 ** rng.uniform(-6, 3)
+        compiled, expected = start.copy(), start.copy()
+        assert static_kernel.accumulate_mode(compiled, z, v, weight)
+        expected += weight * (np.outer(z.real, v.real) - np.outer(z.imag, v.imag))
+        assert np.array_equal(compiled, expected), trial
+    assert not static_kernel.accumulate_mode(np.zeros((3, 2), order="F"), np.zeros(3, complex),
+                                             np.zeros(2, complex), 1.0)
+
+
 def _run(n: int, seed: int) -> IdentificationData:
     """A rig-shaped run: a wandering wire height, a pressure with a slow sine and noise."""
     rng = np.random.default_rng(seed)
@@ -90,8 +109,9 @@ def test_the_physical_linear_runs_are_those_of_lfilter(monkeypatch):
         for scale in (1.0, 1.3):
             values = {k: v * scale for k, v in model.nominal().items()}
             compiled = model.simulate(values, data)
-            with monkeypatch.context() as patch:  # the fallback: scipy.signal.lfilter
+            with monkeypatch.context() as patch:  # the fallbacks: lfilter, NumPy's outer
                 patch.setattr(static_kernel, "first_order_filter", lambda *args: None)
+                patch.setattr(static_kernel, "accumulate_mode", lambda *args: False)
                 assert np.array_equal(model.simulate(values, data), compiled), (n, scale)
 
 

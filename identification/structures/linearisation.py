@@ -392,8 +392,9 @@ def propagate(phi: np.ndarray, drive: np.ndarray, x0: np.ndarray) -> np.ndarray:
         if z is None:
             z = _lfilter(lam, modal_drive[:, i], z0[i])
         weight = 2.0 if lam.imag > 0.0 else 1.0
-        states += weight * (np.outer(z.real, vectors[:, i].real)
-                            - np.outer(z.imag, vectors[:, i].imag))
+        if not static_kernel.accumulate_mode(states, z, vectors[:, i], weight):
+            states += weight * (np.outer(z.real, vectors[:, i].real)
+                                - np.outer(z.imag, vectors[:, i].imag))
     return states
 
 

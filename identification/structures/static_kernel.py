@@ -396,6 +396,16 @@ void panto_first_order_filter(long n, double lr, double li, const double *g, dou
         z[2 * k + 3] = zi;
     }
 }
+
+void panto_modal_accumulate(long rows, long cols, double weight, const double *z,
+                            const double *vr, const double *vi, double *states) {
+    for (long k = 0; k < rows; ++k) {
+        double zr = z[2 * k], zi = z[2 * k + 1];
+        double *row = states + k * cols;
+        for (long j = 0; j < cols; ++j)
+            row[j] += weight * (zr * vr[j] - zi * vi[j]);
+    }
+}
 """
 
 
@@ -404,7 +414,11 @@ def _bind_filter(library: ctypes.CDLL):
     function.restype = None
     function.argtypes = [ctypes.c_long, ctypes.c_double, ctypes.c_double, ctypes.c_void_p,
                          ctypes.c_void_p]
-    return function
+    accumulate = library.panto_modal_accumulate
+    accumulate.restype = None
+    accumulate.argtypes = [ctypes.c_long, ctypes.c_long, ctypes.c_double, ctypes.c_void_p,
+                           ctypes.c_void_p, ctypes.c_void_p, ctypes.c_void_p]
+    return function, accumulate
 
 
 #: The library of :data:`FILTER_SOURCE` (same flags and switch as the balance).
@@ -424,9 +438,10 @@ def first_order_filter(lam: complex, drive: np.ndarray, z0: complex) -> np.ndarr
     ``tests/test_lazy_imports.py``: a platform whose SciPy build fuses multiply-adds may differ
     in the last bit); None without a compiler or with ``PANTO_STATIC_KERNEL=0`` (the caller
     runs lfilter)."""
-    function = _filter_function() if switched_on() else None
-    if function is None:
+    functions = _filter_function() if switched_on() else None
+    if functions is None:
         return None
+    function = functions[0]
     g = np.ascontiguousarray(drive, dtype=complex)
     z = np.empty(len(g) + 1, dtype=complex)
     z[0] = z0
@@ -434,6 +449,24 @@ def first_order_filter(lam: complex, drive: np.ndarray, z0: complex) -> np.ndarr
     return z
 
 
+def accumulate_mode(states: np.ndarray, z: np.ndarray, vector: np.ndarray, weight: float
+                    ) -> bool:
+    """``states += weight * (outer(z.real, v.real) - outer(z.imag, v.imag))`` in place, in that
+    order of operations (the same values as NumPy's, without its four temporary arrays), for
+    C-contiguous float64 `states` of shape ``(len(z), len(v))``; False (nothing done) without
+    the compiled library or where the arrays do not fit it (the caller runs NumPy)."""
+    functions = _filter_function() if switched_on() else None
+    if functions is None or states.dtype != np.float64 or not states.flags.c_contiguous or \
+            states.shape != (len(z), len(vector)):
+        return False
+    z = np.ascontiguousarray(z, dtype=complex)
+    real = np.ascontiguousarray(vector.real, dtype=float)
+    imag = np.ascontiguousarray(vector.imag, dtype=float)
+    functions[1](len(z), len(real), float(weight), z.ctypes.data, real.ctypes.data,
+                 imag.ctypes.data, states.ctypes.data)
+    return True
+
+
 __all__ = ["COMPILER_FLAGS", "SWITCH_VARIABLE", "FUNCTIONS", "SOURCE_CACHE_STEM", "Untranslatable",
            "python_to_c", "kernel_source", "StaticKernel", "load", "switched_on", "BUILD",
-           "FILTER_SOURCE", "FILTER", "first_order_filter"]
+           "FILTER_SOURCE", "FILTER", "first_order_filter", "accumulate_mode"]
