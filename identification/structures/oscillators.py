@@ -47,6 +47,10 @@ from panto.identification.structures import friction_kernel
 #: Model inputs and the outputs a structure can simulate.
 INPUT_NAMES = ("eta", "p")
 OUTPUT_NAMES = ("y_cb", "xi", "F_c")
+#: The exact accelerations [m/s^2] of the bar's mass (``y_cb''``) and the head's (``xi''``) an
+#: oscillator without friction simulates besides its outputs (``A x + B u`` at each sample; the
+#: diagnosis' sensor mass follows them where the sensor's position is not measured but simulated).
+ACCELERATIONS = ("y_cb''", "xi''")
 #: Default fitted outputs (the thesis' two objectives).
 DEFAULT_OUTPUTS = ("F_c", "y_cb")
 
@@ -77,8 +81,12 @@ class OscillatorStructure(ModelStructure):
     """
 
     input_names = INPUT_NAMES
-    #: Every output the structure can simulate (``output_names`` picks the fitted ones).
-    simulable_outputs = OUTPUT_NAMES
+
+    @property
+    def simulable_outputs(self) -> tuple[str, ...]:
+        """Every output the structure can simulate (``output_names`` picks the fitted ones):
+        without friction also the exact accelerations :data:`ACCELERATIONS`."""
+        return OUTPUT_NAMES + (() if self.friction else ACCELERATIONS)
 
     def __init__(self, masses: int, friction: bool = False, *,
                  outputs: Sequence[str] = DEFAULT_OUTPUTS, hold: str = "foh", substeps: int = SUBSTEPS):
@@ -223,9 +231,18 @@ class OscillatorStructure(ModelStructure):
         if self.friction:
             raise NotImplementedError(f"{self.name}: Coulomb friction is not linear")
         a, b, c, d = self.matrices(parameters)
+        c, d = self._with_accelerations(a, b, c, d)
         inputs = [self._position(INPUT_NAMES, n, "input") for n in data.input_names]
-        rows = [self._position(OUTPUT_NAMES, n, "output") for n in data.output_names]
+        rows = [self._position(OUTPUT_NAMES + ACCELERATIONS, n, "output")
+                for n in data.output_names]
         return a, b[:, inputs], c[rows], d[np.ix_(rows, inputs)]
+
+    def _with_accelerations(self, a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray
+                            ) -> tuple[np.ndarray, np.ndarray]:
+        """``C``, ``D`` with the rows of :data:`ACCELERATIONS` below the outputs': the bar's and
+        the head's velocity rows of ``A x + B u``."""
+        rows = [2 * self.masses - 2, 2 * self.masses - 1]
+        return np.vstack([c, a[rows]]), np.vstack([d, b[rows]])
 
     def _position(self, names: Sequence[str], name: str, role: str) -> int:
         if name not in names:
@@ -283,10 +300,14 @@ class OscillatorStructure(ModelStructure):
     def simulate_inputs(self, parameters: Mapping[str, float], u: np.ndarray,
                         period: float) -> np.ndarray:
         """Free run for input samples ``u`` (columns eta, p, 1) every `period` seconds."""
-        _, _, c, d = self.matrices(parameters)
+        a, b, c, d = self.matrices(parameters)
         v = self.values(parameters)
         states = self._states(parameters, u, period)
-        rows = [OUTPUT_NAMES.index(o) for o in self.output_names]
+        if any(o in ACCELERATIONS for o in self.output_names):
+            if self.friction:
+                raise IdentificationError(f"{self.name}: no exact acceleration with friction")
+            c, d = self._with_accelerations(a, b, c, d)
+        rows = [(OUTPUT_NAMES + ACCELERATIONS).index(o) for o in self.output_names]
         y = states @ c[rows].T + u @ d[rows].T
         if not np.all(np.isfinite(y)):
             raise IdentificationError(f"{self.name}: simulation diverged for {dict(v)}")
@@ -508,5 +529,5 @@ def oscillator_from_data(data: IdentificationData, *, masses: int, friction: boo
     constructor's)."""
     return OscillatorStructure(masses, friction, outputs=data.output_names, **options)
 
-__all__ = ["OscillatorStructure", "identify_oscillator", "oscillator_from_data", "offset_start", "discretise",
+__all__ = ["OscillatorStructure", "ACCELERATIONS", "identify_oscillator", "oscillator_from_data", "offset_start", "discretise",
            "propagate", "coulomb_flow", "SUBSTEPS", "INPUT_NAMES", "OUTPUT_NAMES"]
