@@ -71,6 +71,32 @@ def test_the_augmented_frequency_response_is_its_free_run():
     assert np.all(np.max(np.abs(linear - (simulated - simulated[0])), axis=0) < 1e-8 * scale)
 
 
+def test_a_twin_keeps_its_own_acceleration_and_a_cubic_oscillator_offers_none():
+    """The copy :func:`simulating` makes (one output more) simulates its own columns whichever
+    of it and its original ran first (they shared the exact-acceleration cache); a nonlinear
+    oscillator offers no exact acceleration (``A x + B u`` leaves out its nonlinear forces), so
+    a sensor mass on it takes the second difference of the head it simulates."""
+    from panto.identification.structures.oscillator_effects import NonlinearOscillator
+
+    t, eta, p = _inputs(5, 300, 100.0)
+    data = IdentificationData(t, np.column_stack([eta, p]), np.zeros((len(t), 2)), ("eta", "p"),
+                              ("F_c", "y_cb"))
+    for order in (0, 1):
+        original = AugmentedStructure(OscillatorStructure(2, outputs=("F_c", "y_cb")),
+                                      "sensor_inertia", ROLES, {"signal": "xi", "scale": 1.0})
+        twin = simulating(original, "xi")
+        values = {**original.nominal(), "sensor_inertia:F_c": -2.0}
+        for structure in ((original, twin) if order == 0 else (twin, original)):
+            assert structure.simulate(values, data).shape == (len(t), len(structure.output_names))
+    cubic = NonlinearOscillator(2, cubic=True, outputs=("F_c",))
+    assert simulating(cubic, "xi''") is None
+    augmented = AugmentedStructure(cubic, "sensor_inertia", ROLES, {"signal": "xi", "scale": 1.0})
+    data = IdentificationData(t, np.column_stack([eta, p]), np.zeros((len(t), 1)), ("eta", "p"),
+                              ("F_c",))
+    y = augmented.simulate({**augmented.nominal(), "sensor_inertia:F_c": -2.0}, data)
+    assert y.shape == (len(t), 1) and np.all(np.isfinite(y))
+
+
 def _load(name: str):
     """A module of benchmarks/ (the independent plant families), loaded once."""
     if name not in sys.modules:

@@ -3,8 +3,8 @@ what replaces them must agree with them. Cached functions run in the namespace l
 give them (fmu_src/numeric.py ``_namespace``); the pantograph's default parameters read from the
 cache of the static functions are the model's (linearisation.default_parameter_set); the
 compiled first-order filter of every mode (static_kernel.first_order_filter) gives
-scipy.signal.lfilter's values bit for bit, its accumulation into the states NumPy's, on random filters and on the physical-linear
-structure's runs; and a process reading a warm cache runs the structure without either import."""
+scipy.signal.lfilter's values bit for bit, its accumulation into the states NumPy's, on random
+filters and on the physical-linear structure's runs; and a process reading a warm cache runs the structure without either import."""
 from __future__ import annotations
 
 import json
@@ -79,7 +79,9 @@ def test_the_compiled_accumulation_is_numpys_bit_for_bit():
     for trial in range(40):
         rows, cols = int(rng.integers(1, 4000)), int(rng.integers(1, 25))
         z = (rng.normal(size=rows) + 1j * rng.normal(size=rows)) * 10.0 ** rng.uniform(-8, 4)
-        v = rng.normal(size=cols) + 1j * rng.normal(size=cols) * (trial % 4 != 0)
+        v = rng.normal(size=cols) + 1j * rng.normal(size=cols)
+        if trial % 4 == 0:  # a real mode: eig's vectors then come as a real array
+            v = v.real.copy()
         weight = 2.0 if trial % 2 else 1.0
         start = rng.normal(size=(rows, cols)) * 10.0 ** rng.uniform(-6, 3)
         compiled, expected = start.copy(), start.copy()

@@ -157,6 +157,7 @@ def simulating(structure: ModelStructure, name: str) -> ModelStructure | None:
             return None
         twin = copy.copy(structure)
         twin.base = base
+        twin._with_sensor, twin._with_acceleration = None, {}  # its own, of its own base
     elif name in getattr(structure, "simulable_outputs", ()):
         twin = copy.copy(structure)
     else:

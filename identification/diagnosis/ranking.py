@@ -92,6 +92,8 @@ def rank_candidates(model: Any, train: IdentificationData, roles: SignalRoles,
         paths.update(spring_paths)
     best: dict[str, dict[str, Any]] = {}
     total: dict[str, float] = {}
+    extra: dict[str, dict[str, Any]] = {}  # `every`'s keys below MIN_ERR
+    extra_total: dict[str, float] = {}
     per_output = {}
     context = _Context(model, train, roles, signals, drive)
     for j, output in enumerate(train.output_names):
@@ -107,22 +109,27 @@ def rank_candidates(model: Any, train: IdentificationData, roles: SignalRoles,
             continue
         per_output[output] = ranked.ranking.to_dict()
         for score in ranked.ranking.first_step:
-            kept = score.effect.split("@")[0] in every and np.isfinite(score.err)
-            if not (score.err >= MIN_ERR or kept):
-                continue
             key = score.effect
-            score = dataclasses.replace(score, effect=score.effect.split("@")[0])
-            total[key] = total.get(key, 0.0) + float(score.err)
-            if key not in best or (score.significant, score.err) > (
-                    best[key]["significant"], best[key]["err"]):
-                best[key] = _candidate(context, ranked, key, score)
-    for key, candidate in best.items():
-        candidate["err_total"] = total[key]
+            if score.err >= MIN_ERR:
+                table, sums = best, total
+            elif key.split("@")[0] in every and np.isfinite(score.err):
+                table, sums = extra, extra_total  # kept apart: the ranked head stays as it was
+            else:
+                continue
+            score = dataclasses.replace(score, effect=key.split("@")[0])
+            sums[key] = sums.get(key, 0.0) + float(score.err)
+            if key not in table or (score.significant, score.err) > (
+                    table[key]["significant"], table[key]["err"]):
+                table[key] = _candidate(context, ranked, key, score)
+    for table, sums in ((best, total), (extra, extra_total)):
+        for key, candidate in table.items():
+            candidate["err_total"] = sums[key]
     top = sorted(best.values(), key=lambda c: (not c["significant"], -c["err_total"]))
-    top = [c for c in top if c["err_total"] >= MIN_ERR or c["significant"]]
     chosen = top[:max_refits]
-    chosen += [c for key, c in best.items() if key.split("@")[0] in every and
-               all(c is not other for other in chosen)]
+    keys = sorted({k for k in (*best, *extra) if k.split("@")[0] in every})
+    appended = [best.get(k, extra.get(k)) for k in keys]
+    chosen += sorted((c for c in appended if all(c is not other for other in chosen)),
+                     key=lambda c: (not c["significant"], -c["err_total"]))
     return {"top": chosen, "per_output": per_output}
 
 

@@ -24,7 +24,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from panto.identification.diagnosis.augmentations import (INSIDE, AugmentedStructure,
+from panto.identification.diagnosis.augmentations import (INPUT_SIDE, INSIDE, AugmentedStructure,
                                                           describe_augmentation)
 from panto.identification.diagnosis.effects import NONLINEAR_EFFECTS, SignalRoles
 from panto.identification.diagnosis.nominal import Progress, fit_per_output, simulate
@@ -148,7 +148,9 @@ def try_candidate(model: Model, candidate: Mapping[str, Any], current: np.ndarra
         return trial, model, current
     trial = Trial(**{**trial, "description": describe_augmentation(structure),
                      **linear_explains(effect, trial, search.linear_level)})
-    say(f"  {effect}: dBIC {trial.delta_bic:.1f}, |theta|/sigma {trial.significance:.1f}, "
+    where = candidate.get("setting", {}).get("input") if effect in INPUT_SIDE else None
+    say(f"  {effect}{'@' + where if where else ''}: dBIC {trial.delta_bic:.1f}, "
+        f"|theta|/sigma {trial.significance:.1f}, "
         f"validation +{trial.improvement:.2f} points (fold spread {trial.fold_spread:.2f}): "
         + ("accepted" + (f" on the {trial.evidence}" if trial.evidence else "")
            if trial.accepted else "rejected (" + ", ".join(trial.failed) + ")"))
@@ -305,6 +307,8 @@ def _second_start(candidate: Mapping[str, Any], structure: AugmentedStructure, m
         return first
     trial = judge_trial(candidate, Refit(structure, result, simulated), model, train, validation,
                         current, search.options.folds)
+    if first[0]["accepted"] and not trial["accepted"]:
+        return first  # a lower training cost the withheld run does not support: the first stands
     return trial, result, new, simulated
 
 

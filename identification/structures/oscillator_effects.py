@@ -67,6 +67,10 @@ class NonlinearOscillator(OscillatorStructure):
         Friction smoothing velocity [m/s], held (not fitted).
     """
 
+    #: Its outputs only: the linear oscillator's exact accelerations (``A x + B u``) leave out
+    #: the nonlinear forces.
+    simulable_outputs = OUTPUT_NAMES
+
     def __init__(self, masses: int, *, friction: bool = False, cubic: bool = False,
                  outputs: Sequence[str] = DEFAULT_OUTPUTS, hold: str = "foh",
                  v_eps: float = FRICTION_VELOCITY) -> None:

@@ -529,5 +529,6 @@ def oscillator_from_data(data: IdentificationData, *, masses: int, friction: boo
     constructor's)."""
     return OscillatorStructure(masses, friction, outputs=data.output_names, **options)
 
-__all__ = ["OscillatorStructure", "ACCELERATIONS", "identify_oscillator", "oscillator_from_data", "offset_start", "discretise",
+__all__ = ["OscillatorStructure", "ACCELERATIONS", "identify_oscillator", "oscillator_from_data",
+           "offset_start", "discretise",
            "propagate", "coulomb_flow", "SUBSTEPS", "INPUT_NAMES", "OUTPUT_NAMES"]
