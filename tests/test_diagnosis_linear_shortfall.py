@@ -20,8 +20,8 @@ OUTPUTS = ("F_c", "y_cb")
 LAG = 0.3  # s, the bellow's first-order lag (held out of the nominal)
 
 
-def _run(seed: int, n: int = 1500, rate: float = 50.0) -> IdentificationData:
-    """30 s: a multisine of the wire height, pressure steps held 0.5-3 s; the three-mass
+def _run(seed: int, n: int = 1000, rate: float = 50.0) -> IdentificationData:
+    """20 s: a multisine of the wire height, pressure steps held 0.5-3 s; the three-mass
     oscillator at its nominal parameters fed the pressure through a first-order lag (SciPy's
     exact ``lsim``, apart from the diagnosis' own lag), 1 % noise on each output."""
     rng = np.random.default_rng(seed)
