@@ -28,6 +28,14 @@ causes it, and how far the gap shrinks once that effect is in the model.
    *training* residual (the validation run stays withheld), the nominal parameters' sensitivities
    projected out; refit the top ``max_refits`` significant ones as
    :class:`~panto.identification.diagnosis.augmentations.AugmentedStructure` (the nominal's parameters free too).
+   While the adequacy's linear black box validates more than ``LINEAR_SHORTFALL`` (2) points
+   better than the current model, every candidate adding dynamics (lag, delay, sensor mass,
+   extra mode) is refitted as well, on every input it can enter, whatever its rank, and such a
+   refit gets a second start (:func:`~panto.identification.diagnosis.refit.lacks_linear_dynamics`):
+   from the structure's defaults, or by the nominal's own global method where the augmented
+   structure gives its frequency response (a sensor mass on a simulated head:
+   :func:`~panto.identification.diagnosis.refit.global_refit`); a passing refit is kept unless the
+   second passes too with a lower training cost.
    An effect is accepted only when (a) ``dBIC < -10``, ``BIC = sum_j N_eff,j ln sigma_j^2 + p ln
    N_eff`` on the training residuals, ``N_eff`` from the augmented model's residual; (b) its
    magnitude parameter is significant, ``|theta| / sigma_theta > 3``, ``sigma_theta`` inflated by
