@@ -470,11 +470,11 @@ def _search(model: Model, before: np.ndarray, candidates: Sequence[str], search:
         remaining = [c for c in candidates if c not in accepted]
         every = [c for c in ADDS_DYNAMICS if c in remaining] \
             if lacks_linear_dynamics(search, current) else []
-        if every:
+        ranking = rank_candidates(model, train, roles, remaining, options.max_refits, every)
+        if ranking.get("appended"):
             say(f"diagnose: round {round_index + 1}: the linear black box validates more than "
                 f"{LINEAR_SHORTFALL:g} points better: every candidate adding dynamics is refitted "
-                "on every input it can enter")
-        ranking = rank_candidates(model, train, roles, remaining, options.max_refits, every)
+                f"on every input it can enter ({ranking['appended']} beyond the ranked ones)")
         ranking["top"] += _predicted_contact_loss(ranking["top"], remaining, roles, validation,
                                                   current)
         say(f"diagnose: round {round_index + 1}: ranked on the training residual: " +

@@ -77,7 +77,7 @@ def rank_candidates(model: Any, train: IdentificationData, roles: SignalRoles,
     regressors = {k: v for k, v in build_candidate_regressors(
         signals, train.sample_period, roles=roles).items() if k in candidates}
     if not regressors:
-        return {"top": [], "per_output": {}}
+        return {"top": [], "per_output": {}, "appended": 0}
     jac = sensitivities(model.structure, model.parameters, model.free, train)
     drive = next((a for a in roles.actuators if a in train.input_names), train.input_names[0])
     paths = {} if _output_filter(model.structure, model.parameters, train.output_names[0],
@@ -127,10 +127,10 @@ def rank_candidates(model: Any, train: IdentificationData, roles: SignalRoles,
     top = sorted(best.values(), key=lambda c: (not c["significant"], -c["err_total"]))
     chosen = top[:max_refits]
     keys = sorted({k for k in (*best, *extra) if k.split("@")[0] in every})
-    appended = [best.get(k, extra.get(k)) for k in keys]
-    chosen += sorted((c for c in appended if all(c is not other for other in chosen)),
-                     key=lambda c: (not c["significant"], -c["err_total"]))
-    return {"top": chosen, "per_output": per_output}
+    appended = sorted((c for c in (best.get(k, extra.get(k)) for k in keys)
+                       if all(c is not other for other in chosen)),
+                      key=lambda c: (not c["significant"], -c["err_total"]))
+    return {"top": chosen + appended, "per_output": per_output, "appended": len(appended)}
 
 
 def head_signal(model: Any, data: IdentificationData, roles: SignalRoles,
