@@ -9,6 +9,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import signal as sps
 
+from fixtures.excitations import wire_and_pressure
+
 from panto.identification.diagnosis.effects import SignalRoles
 from panto.identification.diagnosis.pipeline import DiagnosisOptions, diagnose
 from panto.identification.diagnosis.ranking import rank_candidates
@@ -25,15 +27,9 @@ def _run(seed: int, n: int = 1000, rate: float = 50.0) -> IdentificationData:
     oscillator at its nominal parameters fed the pressure through a first-order lag (SciPy's
     exact ``lsim``, apart from the diagnosis' own lag), 1 % noise on each output."""
     rng = np.random.default_rng(seed)
-    t = np.arange(n) / rate
-    eta = 2.0 + sum(0.004 * np.sin(2 * np.pi * f * t + rng.uniform(0, 2 * np.pi))
-                    for f in (0.4, 1.1, 2.3, 3.7, 5.3))
-    p = np.empty(n)
-    k = 0
-    while k < n:
-        hold = int(rng.uniform(0.5, 3.0) * rate)
-        p[k:k + hold] = rng.uniform(3.6, 4.4)
-        k += hold
+    t, eta, p = wire_and_pressure(rng, n, rate, amplitude=0.004,
+                                  frequencies=(0.4, 1.1, 2.3, 3.7, 5.3), hold=(0.5, 3.0),
+                                  levels=(3.6, 4.4))
     lagged = sps.lsim(([1.0], [LAG, 1.0]), p - p[0], t)[1] + p[0]
     structure = OscillatorStructure(3, outputs=OUTPUTS)
     clean = structure.simulate(structure.nominal(), IdentificationData(

@@ -8,12 +8,10 @@ the augmented structure gives its frequency response, and the refit's second sta
 nominal's global method."""
 from __future__ import annotations
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
 from scipy import signal as sps
+
+from fixtures.excitations import load_benchmark, wire_and_pressure
 
 from panto.identification.diagnosis.augmentations import AugmentedStructure, simulating
 from panto.identification.diagnosis.effects import SignalRoles
@@ -21,24 +19,15 @@ from panto.identification.diagnosis.pipeline import DiagnosisOptions, diagnose
 from panto.identification.estimation.base import IdentificationData
 from panto.identification.structures.oscillators import OscillatorStructure
 
-_BENCHMARKS = Path(__file__).resolve().parent.parent / "benchmarks"
 ROLES = SignalRoles(position="eta", force="F_c", actuators=("eta", "p"), sensor_position=None,
                     head_position="xi")
 
 
 def _inputs(seed: int, n: int, rate: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Time, a multisine of the wire height up to 12 Hz and pressure steps held 0.5-2 s."""
-    rng = np.random.default_rng(seed)
-    t = np.arange(n) / rate
-    eta = 2.0 + sum(0.002 * np.sin(2 * np.pi * f * t + rng.uniform(0, 2 * np.pi))
-                    for f in (0.5, 1.3, 2.9, 4.7, 7.1, 9.7, 12.1))
-    p = np.empty(n)
-    k = 0
-    while k < n:
-        hold = int(rng.uniform(0.5, 2.0) * rate)
-        p[k:k + hold] = rng.uniform(3.7, 4.3)
-        k += hold
-    return t, eta, p
+    return wire_and_pressure(np.random.default_rng(seed), n, rate, amplitude=0.002,
+                             frequencies=(0.5, 1.3, 2.9, 4.7, 7.1, 9.7, 12.1), hold=(0.5, 2.0),
+                             levels=(3.7, 4.3))
 
 
 def test_the_head_acceleration_is_the_limit_of_its_second_difference():
@@ -97,23 +86,13 @@ def test_a_twin_keeps_its_own_acceleration_and_a_cubic_oscillator_offers_none():
     assert y.shape == (len(t), 1) and np.all(np.isfinite(y))
 
 
-def _load(name: str):
-    """A module of benchmarks/ (the independent plant families), loaded once."""
-    if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(name, _BENCHMARKS / f"{name}.py")
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[name] = module
-        spec.loader.exec_module(module)
-    return sys.modules[name]
-
-
 def test_a_heavy_sensor_mass_is_named_with_its_mass():
     """The seen held-out case two-mass/sensor_inertia/1896 (benchmarks/effect_plants.py, a plant
     written apart from the diagnosis: 3.9 kg above the head, contact force only, multisine at
     100 Hz): named first with its mass within 1 % and the withheld fit at the plant's own
     ceiling (without the global refit: ``extra_mode``, 70.1 -> 93.9 %). The two candidates that
     competed there only (the full vocabulary names the same; a shorter test)."""
-    plants, harness = _load("effect_plants"), _load("diagnosis_families")
+    plants, harness = load_benchmark("effect_plants"), load_benchmark("diagnosis_families")
     case = plants.effect_case(plants.draw_spec("two-mass", "sensor_inertia", 1896, quick=True))
     result = diagnose(harness.to_data(case, 0), harness.to_data(case, 1), structure="two-mass",
                       options=DiagnosisOptions(candidates=("sensor_inertia", "extra_mode"),

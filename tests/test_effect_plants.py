@@ -7,36 +7,23 @@ inertia against the second difference of the head's height; and the harness's sp
 """
 from __future__ import annotations
 
-import importlib.util
-import sys
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy import signal
 
-_BENCHMARKS = Path(__file__).resolve().parent.parent / "benchmarks"
-
-
-def _load(name: str):
-    if name in sys.modules:
-        return sys.modules[name]
-    spec = importlib.util.spec_from_file_location(name, _BENCHMARKS / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[name] = module
-    spec.loader.exec_module(module)
-    return module
+from fixtures.excitations import load_benchmark
 
 
 @pytest.fixture(scope="module")
 def ep():
-    return _load("effect_plants")
+    return load_benchmark("effect_plants")
 
 
 @pytest.fixture(scope="module")
 def harness():
-    return _load("diagnosis_families")
+    return load_benchmark("diagnosis_families")
 
 
 def _truth(ep, masses: int, seed: int = 5) -> dict:

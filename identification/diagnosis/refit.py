@@ -27,11 +27,13 @@ import numpy as np
 from panto.identification.diagnosis.augmentations import (INPUT_SIDE, INSIDE, AugmentedStructure,
                                                           describe_augmentation)
 from panto.identification.diagnosis.effects import NONLINEAR_EFFECTS, SignalRoles
-from panto.identification.diagnosis.nominal import Progress, fit_per_output, simulate
+from panto.identification.diagnosis.nominal import (GLOBAL_BUDGET, Progress, fit_nominal,
+                                                    fit_per_output, simulate)
 from panto.identification.diagnosis.support import (IMPROVEMENT_FLOOR, Refit, judge_trial,
                                                      residuals)
 from panto.identification.estimation.base import (IdentificationData, IdentificationError,
                                                   ModelStructure)
+from panto.identification.estimation.global_fit import GlobalFitOptions
 from panto.identification.estimation.least_squares import fit_least_squares
 
 
@@ -267,23 +269,25 @@ def _linear(structure: AugmentedStructure, parameters: Mapping[str, float],
 def global_refit(structure: AugmentedStructure, train: IdentificationData, free: tuple[str, ...],
                  search: Search, first: Any) -> tuple[Any, Model]:
     """The refit by the nominal's own global method
-    (:func:`~panto.identification.estimation.global_fit.fit_global`, the diagnosis'
-    ``global_fit`` options, each start :data:`~panto.identification.diagnosis.nominal.
+    (:func:`~panto.identification.diagnosis.nominal.fit_nominal` with the diagnosis'
+    ``global_fit`` options: :func:`~panto.identification.estimation.global_fit.fit_global`, each start :data:`~panto.identification.diagnosis.nominal.
     GLOBAL_BUDGET` times a refit's budget): `first` (the refit from the current model) as its
     default start, starts from the data's frequency response matched by the augmented structure's
     own, and perturbations of the best. A nominal fitted without a heavy sensor mass absorbs it
     far from its own parameters (seen held-out two-mass/sensor_inertia/1896: 3.9 kg, the refit
     from there and from the defaults stopped at 84.7 % where the plant's parameters give 98.6 %)."""
-    from panto.identification.diagnosis.nominal import GLOBAL_BUDGET
-    from panto.identification.estimation.global_fit import GlobalFitOptions, fit_from_start
+    budget = {**search.fit_options, "max_evaluations":
+              GLOBAL_BUDGET * int(search.fit_options.get("max_evaluations", 400))}
+    result = fit_nominal(structure, free, train,
+                         global_fit=search.options.global_fit or GlobalFitOptions(),
+                         initial=dict(first.parameters), default=first, **budget)
+    return result, _model(structure, result, free)
 
-    options = dict(search.fit_options)
-    options["max_evaluations"] = GLOBAL_BUDGET * int(options.get("max_evaluations", 400))
-    result = fit_from_start(structure, train, free=free,
-                            global_fit=search.options.global_fit or GlobalFitOptions(),
-                            initial=dict(first.parameters), default=first, **options)
-    return result, Model(structure, dict(result.parameters), free, dict(result.std),
-                         np.asarray(result.covariance, float), dict(result.fit))
+
+def _model(structure: ModelStructure, result: Any, free: tuple[str, ...]) -> Model:
+    """The model a refit's `result` gives."""
+    return Model(structure, dict(result.parameters), free, dict(result.std),
+                 np.asarray(result.covariance, float), dict(result.fit))
 
 
 def _second_start(candidate: Mapping[str, Any], structure: AugmentedStructure, model: Model,
@@ -352,8 +356,7 @@ def refit(structure: AugmentedStructure, model: Model, train: IdentificationData
                                   initial={**initial, **{p: 0.0 for p in neutral}}, **fit_options)
         if again.details.get("cost", math.inf) < result.details.get("cost", math.inf):
             result = again
-    return result, Model(structure, dict(result.parameters), free, dict(result.std),
-                          np.asarray(result.covariance, float), dict(result.fit))
+    return result, _model(structure, result, free)
 
 
 #: Where :func:`located_zone` looks for a dead zone: the input's quantiles at these levels, each
