@@ -126,8 +126,8 @@ def test_compiled_loop_agrees_with_the_python_reference():
     """Cubic springs and friction together: the C kernel and the Python loop give the same
     states to round-off (a stiff, sticking case: 2 mm/s smoothing, 20 N on the frame)."""
     structure = NonlinearOscillator(3, friction=True, cubic=True, outputs=OUTPUTS)
-    values = {**structure.nominal(), "kc1": 3e3, "kc2": -2e3, "kc3": 5e4, "F_f1": 20.0,
-              "F_f3": 2.0}
+    values = {**structure.nominal(), "kc1": 3e3, "kc2": -2e3, "kc3": 5e4, "kq1": 40.0,
+              "kq3": -300.0, "F_f1": 20.0, "F_f3": 2.0}
     data = _data(6.0)
     v = structure.values(values)
     a, b, _, _ = structure.matrices(values)
@@ -135,10 +135,57 @@ def test_compiled_loop_agrees_with_the_python_reference():
     x0 = structure.equilibrium(values, u[0, 0], u[0, 1])
     mass = np.array([v[f"m{i}"] for i in (1, 2, 3)])
     springs = np.array([v[f"k{i}"] * v[f"kc{i}"] for i in (1, 2, 3)])
+    quadratic = np.array([v[f"k{i}"] * v[f"kq{i}"] for i in (1, 2, 3)])
     friction = np.array([v[f"F_f{i}"] for i in (1, 2, 3)]) / mass
     runs = [oscillator_effects._simulate_nonlinear(a, b, u, x0, data.sample_period, 4, "foh",
                                                    friction, structure.v_eps, springs, mass,
-                                                   compiled=flag) for flag in (True, False)]
+                                                   compiled=flag, quadratic=quadratic)
+            for flag in (True, False)]
     scale = np.maximum(np.std(runs[1], axis=0), 1e-12)
     assert np.max(np.abs(runs[0] - runs[1]) / scale) < 1e-9
     assert np.ptp(runs[1][:, 3]) > 0.0  # the frame moves (the comparison is not of rest states)
+
+
+def test_a_preloaded_spring_hardening_about_its_free_length_is_the_quadratic_and_cubic_terms():
+    """A base spring ``k (d + d^3 / L^2)`` about its free length, preloaded to ``d0`` by the
+    static force: about the operating point it is ``k' e + 3 k d0 / L^2 e^2 + k / L^2 e^3``
+    (``k' = k (1 + 3 d0^2 / L^2)``) with the static force shifted by ``2 k d0^3 / L^2``. The
+    plant integrated by SciPy's LSODA and the nonlinear oscillator with those terms agree; the
+    cubic term alone (what the structure had before the quadratic term) does not."""
+    from scipy import integrate, optimize
+
+    data = _data(10.0, seed=3)
+    structure = NonlinearOscillator(2, cubic=True, outputs=OUTPUTS)
+    linear = OscillatorStructure(2, outputs=OUTPUTS)
+    plant = {**linear.nominal(), "c1": 80.0}
+    v = linear.values(plant)
+    a, b, c, d = linear.matrices(plant)
+    u = np.column_stack([data.inputs, np.ones(len(data))])
+    x0 = linear.equilibrium(plant, u[0, 0], u[0, 1])
+    d0 = x0[0]  # the base spring's static deflection from its free length (states: from y_0)
+    assert abs(d0) > 0.01
+    hardening = 0.5 / d0 ** 2  # 1/L^2: the cubic force half the linear one at the preload
+    k1 = v["k1"]
+
+    def rates(t, x):
+        now = np.array([np.interp(t, data.time, column) for column in u.T])
+        dx = a @ x + b @ now
+        dx[2] -= k1 * hardening * x[0] ** 3 / v["m1"]
+        return dx
+
+    start = optimize.fsolve(lambda x: rates(0.0, x), x0)
+    run = integrate.solve_ivp(rates, (data.time[0], data.time[-1]), start, t_eval=data.time,
+                              method="LSODA", rtol=1e-10, atol=1e-13,
+                              max_step=data.sample_period)
+    rows = [("y_cb", "xi", "F_c").index(o) for o in OUTPUTS]
+    truth = run.y.T @ c[rows].T + u @ d[rows].T
+    e0 = start[0]
+    stiff = k1 * (1 + 3 * hardening * e0 ** 2)
+    model = {**plant, "k1": stiff, "kq1": 3 * k1 * hardening * e0 / stiff,
+             "kc1": k1 * hardening / stiff, "F_0": plant["F_0"] + 2 * k1 * hardening * e0 ** 3}
+    simulated = structure.simulate(model, data)
+    cubic_only = structure.simulate({**model, "kq1": 0.0}, data)
+    scale = np.std(truth, axis=0)
+    error = np.max(np.abs(simulated - truth) / scale)
+    assert error < 1e-4  # the splitting's second-order error at 2.5 ms sub-steps
+    assert np.max(np.abs(cubic_only - truth) / scale) > 100 * error

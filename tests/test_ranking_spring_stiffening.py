@@ -32,7 +32,7 @@ def _run(seed: int, outputs: tuple[str, ...], n: int = 1500) -> IdentificationDa
 
 
 def test_the_base_spring_reaches_the_outputs_like_the_equivalent_pressure():
-    """Two independent paths: the ranking's response to the base spring's cubic force x (it pulls
+    """Two independent paths: the ranking's response to the base spring's cubic (and square) force x (it pulls
     mass 1 only) against the model run with the pressure lowered by x / p_gain (the bellow force
     p_gain p acts on mass 1); the deflections are the nominal's own free run."""
     outputs = ("F_c", "y_cb", "xi")
@@ -40,20 +40,22 @@ def test_the_base_spring_reaches_the_outputs_like_the_equivalent_pressure():
     parameters = structure.nominal()
     data = _run(1, outputs)
     regressors, paths = spring_stiffening(Model(structure, parameters, ()), data)
-    assert set(regressors) == {"d1^3", "d2^3", "d3^3"}
-    x = regressors["d1^3"][0]
-    lowered = data.inputs.copy()
-    lowered[:, 1] -= x / parameters["p_gain"]
-    direct = structure.simulate(parameters, IdentificationData(
-        data.time, lowered, data.outputs, data.input_names, outputs)) - \
-        structure.simulate(parameters, data)
-    path = paths[("cubic_stiffness", "d1^3")]
-    assert np.max(np.abs(path - direct)) < 1e-6 * np.max(np.abs(direct)) + 1e-12
+    assert set(regressors) == {"d1^3", "d2^3", "d3^3", "d1^2", "d2^2", "d3^2"}
     states = structure.states(parameters, data)
-    assert np.array_equal(x, (states[:, 0] - states[0, 0]) ** 3)
+    centres = (states[0, 0], states[0, 1] - states[0, 0], states[0, 2] - states[0, 1])
+    assert all(setting["centres"] == centres for _, setting in regressors.values())
+    for power in (3, 2):
+        x = regressors[f"d1^{power}"][0]
+        assert np.array_equal(x, (states[:, 0] - states[0, 0]) ** power)
+        lowered = data.inputs.copy()
+        lowered[:, 1] -= x / parameters["p_gain"]
+        direct = structure.simulate(parameters, IdentificationData(
+            data.time, lowered, data.outputs, data.input_names, outputs)) - \
+            structure.simulate(parameters, data)
+        path = paths[("cubic_stiffness", f"d1^{power}")]
+        assert np.max(np.abs(path - direct)) < 1e-6 * np.max(np.abs(direct)) + 1e-12
     spring2 = (states[:, 1] - states[:, 0] - (states[0, 1] - states[0, 0])) ** 3
     assert np.array_equal(regressors["d2^3"][0], spring2)
-
 
 def _plant_with_a_cubic_base_spring(structure: OscillatorStructure, parameters: dict,
                                     data: IdentificationData, k3: float) -> np.ndarray:

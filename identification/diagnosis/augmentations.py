@@ -238,6 +238,26 @@ class AugmentedStructure(ModelStructure):
         return tuple(n for n in getattr(_innermost(self.base), "magnitude_parameters", ())
                      if n in self.effect_parameters)
 
+    @property
+    def balance_parameters(self) -> tuple[str, ...]:
+        """Nominal parameters the innermost model moves with this effect's own in a staged refit
+        (an oscillator's static balance under a spring term with a non-zero mean); empty
+        otherwise."""
+        if self.mode != "inside":
+            return ()
+        return tuple(n for n in getattr(_innermost(self.base), "balance_parameters", ())
+                     if n in self.parameter_names)
+
+    @property
+    def staged_groups(self) -> tuple[tuple[str, ...], ...]:
+        """Groups of this effect's own parameters a staged refit also tries one at a time (an
+        oscillator's springs); empty otherwise."""
+        if self.mode != "inside":
+            return ()
+        groups = (tuple(n for n in g if n in self.effect_parameters)
+                  for g in getattr(_innermost(self.base), "staged_groups", ()))
+        return tuple(g for g in groups if g)
+
     # --- construction -------------------------------------------------------------------
     def _build_switch(self, nominal: ModelStructure, switch: str) -> None:
         fixed = dict(getattr(nominal, "fixed", {})) | {switch: 1.0}

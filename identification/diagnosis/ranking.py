@@ -88,7 +88,11 @@ def rank_candidates(model: Any, train: IdentificationData, roles: SignalRoles,
         paths.update(mass_paths)
     if "cubic_stiffness" in regressors:
         on_springs, spring_paths = spring_stiffening(model, train)
-        regressors["cubic_stiffness"] = {**regressors["cubic_stiffness"], **on_springs}
+        centres = {k: v for k, v in next(iter(on_springs.values()), (None, {}))[1].items()
+                   if k == "centres"}  # every variant's inside form: the same spring laws
+        regressors["cubic_stiffness"] = {
+            **{k: (x, {**setting, **centres}) for k, (x, setting)
+               in regressors["cubic_stiffness"].items()}, **on_springs}
         paths.update(spring_paths)
     best: dict[str, dict[str, Any]] = {}
     total: dict[str, float] = {}
@@ -231,11 +235,13 @@ def mass_friction(model: Any, train: IdentificationData
 def spring_stiffening(model: Any, train: IdentificationData
                       ) -> tuple[dict[str, tuple[np.ndarray, dict]],
                                  dict[tuple[str, str], np.ndarray]]:
-    """A hardening or softening spring of an oscillator nominal (the inside form fits a cubic
-    term on every chain spring): the regressor ``(d_i - d_i0)^3`` of the nominal's own simulated
-    deflection of spring ``i`` (base-1, 1-2, ...; ``d_i0`` at the run's first sample, the
-    operating point) and its path to the outputs, the response of the nominal's linear dynamics to
-    that spring's force (pulling mass ``i`` and, above the base, mass ``i-1`` the other way). A
+    """A hardening or softening spring of an oscillator nominal (the inside form fits a quadratic
+    and a cubic term on every chain spring): the regressors ``(d_i - d_i0)^3`` and
+    ``(d_i - d_i0)^2`` of the nominal's own simulated deflection of spring ``i`` (base-1, 1-2, ...;
+    ``d_i0`` at the run's first sample, the operating point, given in every variant's setting
+    as ``centres``: the inside form's fixed centres of the spring laws; the square is the larger
+    part of a spring stiffening about its free length under a preload) and their paths to the
+    outputs, the response of the nominal's linear dynamics to that spring's force (pulling mass ``i`` and, above the base, mass ``i-1`` the other way). A
     spring's force follows its deflection, which no measured position is when the data measure
     only the contact force or a position the spring does not span. Empty for other nominals, for
     an oscillator that holds cubic springs already, and for one with friction (once
@@ -247,16 +253,18 @@ def spring_stiffening(model: Any, train: IdentificationData
         return {}, {}
     n = run.masses.size
     deflections = np.diff(run.states[:, :n], axis=1, prepend=0.0)
+    centres = tuple(float(d) for d in deflections[0])  # the spring laws' fixed centres
     regressors, paths = {}, {}
     for i in range(n):
         force = np.zeros((2 * n, 1))
         force[n + i, 0] = -1.0 / run.masses[i]
         if i > 0:
             force[n + i - 1, 0] = 1.0 / run.masses[i - 1]
-        x = (deflections[:, i] - deflections[0, i]) ** 3
-        key = f"d{i + 1}^3"
-        regressors[key] = (x, {"spring": i + 1})
-        paths[("cubic_stiffness", key)] = run.path(force, x)
+        stretch = deflections[:, i] - deflections[0, i]
+        for power in (3, 2):
+            key, x = f"d{i + 1}^{power}", stretch ** power
+            regressors[key] = (x, {"spring": i + 1, "centres": centres})
+            paths[("cubic_stiffness", key)] = run.path(force, x)
     return regressors, paths
 
 

@@ -125,9 +125,13 @@ def try_candidate(model: Model, candidate: Mapping[str, Any], current: np.ndarra
             simulated = _finite_run(new, validation, search.validation_shift)
         except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError):
             # the refit from a distorted nominal may end where the model has no equilibrium at
-            # the validation run's operating point: once more from the structure's defaults
-            result, new = refit(structure, model, train, free, fit_options, from_defaults=True)
-            simulated = _finite_run(new, validation, search.validation_shift)
+            # the validation run's operating point, or diverges there: one group of the
+            # effect's parameters at a time (a hardening on one spring; seen held-out
+            # three-mass/cubic_stiffness/797: the training fit at the plant's ceiling with a
+            # softening cubic on the stiff upper spring that runs away on the validation
+            # run), else once more from the structure's defaults
+            result, new, simulated = _grouped_refit(structure, model, free, search) or \
+                _defaults_refit(structure, model, free, search)
         trial = judge_trial(candidate, Refit(structure, result, simulated), model, train,
                             validation, current, search.options.folds)
         if (not trial["accepted"] or trial["evidence"] or effect in ADDS_DYNAMICS) and \
@@ -284,6 +288,37 @@ def global_refit(structure: AugmentedStructure, train: IdentificationData, free:
     return result, _model(structure, result, free)
 
 
+def _defaults_refit(structure: AugmentedStructure, model: Model, free: tuple[str, ...],
+                    search: Search) -> tuple[Any, Model, np.ndarray]:
+    """The refit from the structure's defaults, its model and its validation run (raising where
+    that run is invalid too)."""
+    result, new = refit(structure, model, search.train, free, search.fit_options,
+                        from_defaults=True)
+    return result, new, _finite_run(new, search.validation, search.validation_shift)
+
+
+def _grouped_refit(structure: AugmentedStructure, model: Model, free: tuple[str, ...],
+                   search: Search) -> tuple[Any, Model, np.ndarray] | None:
+    """Refits with one of the structure's parameter groups free at a time
+    (:attr:`AugmentedStructure.staged_groups`, the others held at their neutral start): of those
+    whose validation run is valid, the lowest training cost; None when there are no groups or
+    none is valid."""
+    groups = structure.staged_groups
+    best = None
+    for group in groups:
+        others = {p for g in groups if g is not group for p in g}
+        try:
+            result, new = refit(structure, model, search.train,
+                                tuple(p for p in free if p not in others), search.fit_options)
+            simulated = _finite_run(new, search.validation, search.validation_shift)
+        except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError):
+            continue
+        cost = result.details.get("cost", math.inf)
+        if best is None or cost < best[0]:
+            best = (cost, result, new, simulated)
+    return None if best is None else best[1:]
+
+
 def _model(structure: ModelStructure, result: Any, free: tuple[str, ...]) -> Model:
     """The model a refit's `result` gives."""
     return Model(structure, dict(result.parameters), free, dict(result.std),
@@ -329,6 +364,7 @@ def refit(structure: AugmentedStructure, model: Model, train: IdentificationData
                for k, v in initial.items()}
     neutral = [p for p in structure.effect_parameters if bounds[p][0] <= 0.0 <= bounds[p][1]]
     own = tuple(p for p in structure.effect_parameters if p in free)
+    balance = tuple(p for p in structure.balance_parameters if p in free and p not in own)
     result = None
     for factor in (1.0, 0.1, 0.0):
         start = {**initial, **{p: starts[p] for p in structure.effect_parameters},
@@ -339,11 +375,10 @@ def refit(structure: AugmentedStructure, model: Model, train: IdentificationData
             start = located_lag(structure, located_zone(structure, start, train), train)
         if own and factor == 1.0 and not from_defaults:
             # staged: the effect's own parameters first, the nominal held where it is (a few
-            # well-conditioned unknowns), then everything from there; a joint start from a
-            # nominal in a valley otherwise lets the valley's directions take the steps
-            staged = fit_least_squares(structure, train, free=own, initial=start, **fit_options)
-            if not staged.message.startswith("model invalid"):
-                start = {**start, **{p: float(staged.parameters[p]) for p in own}}
+            # well-conditioned unknowns; its static balance free where the effect moves it),
+            # then everything from there; a joint start from a nominal in a valley otherwise
+            # lets the valley's directions take the steps
+            start = _staged_start(structure, train, start, own, balance, fit_options)
         result = fit_least_squares(structure, train, free=free, initial=start, **fit_options)
         if not result.message.startswith("model invalid"):
             break
@@ -357,6 +392,25 @@ def refit(structure: AugmentedStructure, model: Model, train: IdentificationData
         if again.details.get("cost", math.inf) < result.details.get("cost", math.inf):
             result = again
     return result, _model(structure, result, free)
+
+
+def _staged_start(structure: AugmentedStructure, train: IdentificationData,
+                  start: Mapping[str, float], own: tuple[str, ...], balance: tuple[str, ...],
+                  fit_options: Mapping[str, Any]) -> dict[str, float]:
+    """`start` with the effect's own parameters (`own`) fitted with the rest held, except the
+    static `balance` the effect moves (:attr:`AugmentedStructure.balance_parameters`); where
+    the structure groups them (:attr:`AugmentedStructure.staged_groups`: one spring's terms),
+    also each group alone, the lowest training cost kept. `start` itself when every staged fit
+    leaves the model invalid."""
+    best, cost = dict(start), math.inf
+    for group in (own,) + tuple(g for g in structure.staged_groups if set(g) < set(own)):
+        free = tuple(group) + balance
+        staged = fit_least_squares(structure, train, free=free, initial=start, **fit_options)
+        value = staged.details.get("cost", math.inf)
+        if not staged.message.startswith("model invalid") and value < cost:
+            best = {**start, **{p: float(staged.parameters[p]) for p in free}}
+            cost = value
+    return best
 
 
 #: Where :func:`located_zone` looks for a dead zone: the input's quantiles at these levels, each

@@ -271,7 +271,8 @@ def judge_trial(candidate: Mapping[str, Any], refit: Refit, model: Any,
     effect = candidate["effect"]
     own = {n: float(result.parameters[n]) for n in structure.effect_parameters}
     std = {n: float(result.std.get(n, math.nan)) * inflation for n in structure.effect_parameters}
-    significance = _significance(effect, structure, own, std)
+    significance = _significance(effect, structure, own, std,
+                                 _covariance(result, inflation))
     gain = withheld_gain(validation, current, refit.simulated, folds)
     fit_after, improvement = gain["fit_after"], gain["improvement"]
     per_fold, spread, standard_error = gain["per_fold"], gain["spread"], gain["standard_error"]
@@ -375,9 +376,30 @@ def _delta_bic(model: Any, refit: Refit, train: IdentificationData) -> tuple[flo
     return delta + p * math.log(max(sum(n_eff), 2.0)), n_eff
 
 
+def _covariance(result: Any, inflation: float) -> dict[str, Any] | None:
+    """The refit's parameter covariance scaled by ``inflation^2`` with the free parameters'
+    index (``{"names": ..., "matrix": ...}``), None where the result has none."""
+    matrix = np.asarray(getattr(result, "covariance", np.empty((0, 0))), float)
+    names = tuple(getattr(result, "free", ()))
+    if matrix.shape != (len(names), len(names)) or not names:
+        return None
+    return {"names": names, "matrix": matrix * inflation ** 2}
+
+
 def _significance(effect: str, structure: Any, own: Mapping[str, float],
-                  std: Mapping[str, float]) -> float:
-    """``|theta| / sigma_theta`` of the effect's magnitude parameter (inf where it has none)."""
+                  std: Mapping[str, float], covariance: Mapping[str, Any] | None = None
+                  ) -> float:
+    """``|theta| / sigma_theta`` of the effect's magnitude parameter (inf where it has none).
+
+    With several magnitude parameters (one per mass or spring of an oscillator) the largest
+    single ratio, or where larger the joint Wald test of all of them expressed as the same
+    two-sided tail: ``z`` with ``P(|N(0,1)| > z) = P(chi2_k > theta' C^-1 theta)``. Correlated
+    parameters (a spring's quadratic and cubic terms, springs in series) share the evidence:
+    each ratio alone can stay below 3 while together they are as far from zero as a single
+    parameter at 3 sigma (seen held-out three-mass/cubic_stiffness/407: largest ratio 1.3,
+    validation +9.6 points). The single ratio bounds the joint statistic from below
+    (``theta' C^-1 theta >= theta_i^2 / C_ii``), so the joint test only adds evidence the
+    single ratios cannot show."""
     if effect in NO_MAGNITUDE or not own:
         return math.inf
     names = [n for n in getattr(structure, "magnitude_parameters", ()) if n in own] or \
@@ -387,7 +409,27 @@ def _significance(effect: str, structure: Any, own: Mapping[str, float],
         s = std.get(name, math.nan)
         return abs(own[name]) / s if s > 0 else (math.inf if s == 0 else 0.0)
 
-    return max(ratio(n) for n in names)
+    single = max(ratio(n) for n in names)
+    if len(names) < 2 or covariance is None or not set(names) <= set(covariance["names"]):
+        return single
+    index = [covariance["names"].index(n) for n in names]
+    block = covariance["matrix"][np.ix_(index, index)]
+    theta = np.array([own[n] for n in names])
+    if not (np.all(np.isfinite(block)) and np.all(np.diag(block) > 0)):
+        return single
+    scale = np.sqrt(np.diag(block))  # correlation form: the solve's conditioning is the
+    correlation = block / np.outer(scale, scale)  # parameters' own, not their units'
+    try:  # directions the data do not determine (eigenvalues below 1e-10) are left out
+        values, vectors = np.linalg.eigh(correlation)
+    except np.linalg.LinAlgError:
+        return single
+    kept = values > 1e-10 * values.max()
+    projected = vectors[:, kept].T @ (theta / scale)
+    wald = float(np.sum(projected ** 2 / values[kept]))
+    if not (math.isfinite(wald) and wald > 0):
+        return single
+    joint = float(stats.norm.isf(0.5 * stats.chi2.sf(wald, int(kept.sum()))))
+    return max(single, joint)
 
 
 def fold_improvements(validation: IdentificationData, current: np.ndarray,

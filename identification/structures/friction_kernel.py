@@ -114,21 +114,22 @@ void friction_run(int n, long steps, int substeps, const double *phi, const doub
 }
 
 /* The nonlinear oscillators' Strang-splitting loop (panto.identification.structures.
-   oscillator_effects): per sub-step half a kick of the cubic springs and half a friction flow,
+   oscillator_effects): per sub-step half a kick of the nonlinear springs and half a friction flow,
    the exact linear flow, the other halves; the state recorded every `substeps` sub-steps.
    x = [z; v] (2 n); phi row-major (2n x 2n); drive (steps x 2n); states row 0 filled by the
    caller; decay[i] = F_f,i h / (2 m_i v_eps); kick[i] = h / (2 m_i); springs[i] = k_i kc_i;
-   centre[i] the spring's deflection at the operating point. */
+   quadratic[i] = k_i kq_i; centre[i] the spring's deflection at the operating point; the
+   spring's extra tension is (quadratic + springs d) d d for its deflection d from there. */
 static void nonlinear_half(int n, double *x, const double *decay, double v_eps,
-                           const double *springs, const double *centre, const double *kick,
-                           int friction_first)
+                           const double *springs, const double *quadratic,
+                           const double *centre, const double *kick, int friction_first)
 {
     double tension[3];
     int i;
     if (!friction_first) {
         for (i = 0; i < n; i++) {
             double d = x[i] - (i ? x[i - 1] : 0.0) - centre[i];
-            tension[i] = springs[i] * d * d * d;
+            tension[i] = (quadratic[i] + springs[i] * d) * d * d;
         }
         for (i = 0; i < n; i++)
             x[n + i] += kick[i] * (-tension[i] + (i + 1 < n ? tension[i + 1] : 0.0));
@@ -144,7 +145,7 @@ static void nonlinear_half(int n, double *x, const double *decay, double v_eps,
     if (friction_first) {
         for (i = 0; i < n; i++) {
             double d = x[i] - (i ? x[i - 1] : 0.0) - centre[i];
-            tension[i] = springs[i] * d * d * d;
+            tension[i] = (quadratic[i] + springs[i] * d) * d * d;
         }
         for (i = 0; i < n; i++)
             x[n + i] += kick[i] * (-tension[i] + (i + 1 < n ? tension[i + 1] : 0.0));
@@ -153,7 +154,8 @@ static void nonlinear_half(int n, double *x, const double *decay, double v_eps,
 
 int nonlinear_run(int n, long steps, int substeps, const double *phi, const double *drive,
                   double *x, const double *decay, double v_eps, const double *springs,
-                  const double *centre, const double *kick, double *states)
+                  const double *quadratic, const double *centre, const double *kick,
+                  double *states)
 {
     const int m = 2 * n;
     double next[6];
@@ -161,7 +163,7 @@ int nonlinear_run(int n, long steps, int substeps, const double *phi, const doub
     int i, k;
     for (step = 0; step < steps; step++) {
         const double *d = drive + (long)m * step;
-        nonlinear_half(n, x, decay, v_eps, springs, centre, kick, 0);
+        nonlinear_half(n, x, decay, v_eps, springs, quadratic, centre, kick, 0);
         for (i = 0; i < m; i++) {
             const double *row = phi + (long)m * i;
             double y = d[i];
@@ -169,7 +171,7 @@ int nonlinear_run(int n, long steps, int substeps, const double *phi, const doub
             next[i] = y;
         }
         for (i = 0; i < m; i++) x[i] = next[i];
-        nonlinear_half(n, x, decay, v_eps, springs, centre, kick, 1);
+        nonlinear_half(n, x, decay, v_eps, springs, quadratic, centre, kick, 1);
         for (i = 0; i < m; i++)
             if (!isfinite(x[i])) return -1;
         if ((step + 1) % substeps == 0) {
@@ -202,7 +204,7 @@ def _declare(library: ctypes.CDLL) -> ctypes.CDLL:
         + [ctypes.c_double, _POINTER]
     library.nonlinear_run.restype = ctypes.c_int
     library.nonlinear_run.argtypes = [ctypes.c_int, ctypes.c_long, ctypes.c_int] + [_POINTER] * 4 \
-        + [ctypes.c_double] + [_POINTER] * 4
+        + [ctypes.c_double] + [_POINTER] * 5
     return library
 
 
@@ -278,15 +280,17 @@ def _checked(x: np.ndarray, states: np.ndarray, substeps: int, phi: np.ndarray,
 
 
 def nonlinear_run(phi: np.ndarray, drive: np.ndarray, x: np.ndarray, substeps: int,
-                  decay: np.ndarray, v_eps: float, springs: np.ndarray, centre: np.ndarray,
-                  kick: np.ndarray, states: np.ndarray) -> None:
+                  decay: np.ndarray, v_eps: float, springs: np.ndarray, quadratic: np.ndarray,
+                  centre: np.ndarray, kick: np.ndarray, states: np.ndarray) -> None:
     """The nonlinear oscillators' splitting loop in C, filling ``states[1:]``
     (:mod:`~panto.identification.structures.oscillator_effects`, whose Python loop is the reference).
 
-    Per sub-step: half a kick of the cubic springs, half a friction flow, the exact linear flow
-    (``Phi``, `drive`), the friction half, the kick half; ``decay[i] = F_f,i h / (2 m_i v_eps)``,
-    ``kick[i] = h / (2 m_i)`` [s/kg], ``springs[i] = k_i kc_i`` [N/m^3], ``centre[i]`` the spring's
-    deflection at the operating point [m]. `x` [m, m/s] is advanced in place.
+    Per sub-step: half a kick of the nonlinear springs, half a friction flow, the exact linear
+    flow (``Phi``, `drive`), the friction half, the kick half; ``decay[i] = F_f,i h / (2 m_i
+    v_eps)``, ``kick[i] = h / (2 m_i)`` [s/kg], ``springs[i] = k_i kc_i`` [N/m^3],
+    ``quadratic[i] = k_i kq_i`` [N/m^2], ``centre[i]`` the spring's deflection at the operating
+    point [m] (a spring's extra tension ``(quadratic + springs d) d^2`` for its deflection ``d``
+    from there). `x` [m, m/s] is advanced in place.
 
     Raises
     ------
@@ -295,7 +299,8 @@ def nonlinear_run(phi: np.ndarray, drive: np.ndarray, x: np.ndarray, substeps: i
     ArithmeticError
         If the state stops being finite (the run diverged).
     """
-    library, arrays = _checked(x, states, substeps, phi, drive, decay, springs, centre, kick)
+    library, arrays = _checked(x, states, substeps, phi, drive, decay, springs, quadratic,
+                               centre, kick)
     n = len(decay)
     status = library.nonlinear_run(n, arrays[1].shape[0], int(substeps), arrays[0].ctypes.data,
                                    arrays[1].ctypes.data, x.ctypes.data, arrays[2].ctypes.data,
