@@ -32,9 +32,10 @@ def _run(seed: int, outputs: tuple[str, ...], n: int = 1500) -> IdentificationDa
 
 
 def test_the_base_spring_reaches_the_outputs_like_the_equivalent_pressure():
-    """Two independent paths: the ranking's response to the base spring's cubic (and square) force x (it pulls
-    mass 1 only) against the model run with the pressure lowered by x / p_gain (the bellow force
-    p_gain p acts on mass 1); the deflections are the nominal's own free run."""
+    """Two independent paths: the ranking's response to the base spring's cubic (and square)
+    force x (it pulls mass 1 only) against the model run with the pressure lowered by
+    x / p_gain (the bellow force p_gain p acts on mass 1); the deflections are the nominal's own
+    free run, and every variant carries its first sample's deflections as the centres."""
     outputs = ("F_c", "y_cb", "xi")
     structure = OscillatorStructure(3, outputs=outputs)
     parameters = structure.nominal()
