@@ -106,7 +106,8 @@ def fmu_cache(tmp_path_factory):
 LONGEST_FILES = (
     "test_diagnosis_rig_story.py", "test_diagnosis_pantograph.py", "test_adequacy.py",
     "test_diagnosis_linear_shortfall.py", "test_parameters_and_cli.py", "test_global_fit.py",
-    "test_diagnosis_sensor_mass_global.py", "test_diagnosis_real_data.py",
+    "test_diagnosis_sensor_mass_global.py", "test_diagnosis_preloaded_spring.py",
+    "test_diagnosis_real_data.py",
     "test_diagnosis_effects.py", "test_diagnosis_calibration.py", "test_pantograph_model.py",
     "test_video_tracking.py", "test_diagnosis.py", "test_identify_any_table.py",
     "test_identification_physical.py", "test_fmu_binaries.py", "test_diagnosis_global_fit.py",
