@@ -38,6 +38,20 @@ def test_two_forces_trading_against_each_other_are_jointly_far_from_zero():
     assert z > 5
 
 
+def test_an_undetermined_magnitude_is_left_out_of_the_joint_test():
+    """The least-squares uncertainty gives a direction the data do not determine an infinite
+    deviation: that magnitude is left out, the other two are tested jointly as without it."""
+    own = {"F_f1": 20.0, "F_f2": 4.0, "F_f3": 7.0}
+    std = {"F_f1": 10.0, "F_f2": 2.0, "F_f3": math.nan}
+    reference = _significance("coulomb_friction", _Oscillator(), own, std, _covariance(std, -0.9))
+    covariance = _covariance(std, -0.9)
+    covariance["matrix"][3, 3] = math.inf
+    undetermined = {**std, "F_f3": math.inf}
+    assert _significance("coulomb_friction", _Oscillator(), own, undetermined,
+                         covariance) == pytest.approx(reference, rel=1e-12)
+    assert reference > 5
+
+
 def test_the_joint_test_never_lowers_the_single_ratio_and_one_magnitude_is_unchanged():
     """Positively correlated forces at 2 sigma each carry no more evidence together than one
     (the joint tail on 2 degrees of freedom is below the single ratio): the single ratio stands;

@@ -51,6 +51,10 @@ def test_a_run_away_from_the_centre_starts_at_rest_in_the_nonlinear_balance(monk
     linear = fixed.equilibrium({**values, "kq1": 0.0, "kc1": 0.0, "kq2": 0.0, "kc3": 0.0},
                                2.0, 5.0)
     assert abs(fixed.equilibrium(values, 2.0, 5.0)[0] - linear[0]) > 1e-3  # the hardening shows
+    t = np.arange(300) / 100.0  # the linear states the ranking reads rest at the linear rest
+    data = IdentificationData(t, np.column_stack([np.full_like(t, 2.0), np.full_like(t, 5.0)]),
+                              np.zeros((len(t), 2)), ("eta", "p"), fixed.output_names)
+    assert np.max(np.abs(np.diff(fixed.states(values, data), axis=0))) < 1e-12
     with pytest.raises(IdentificationError, match="centres"):
         NonlinearOscillator(2, cubic=True, centres=(0.01,))
 

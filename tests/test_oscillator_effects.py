@@ -123,8 +123,9 @@ def test_effects_without_an_inside_form_are_refused():
 @pytest.mark.skipif(not oscillator_effects.friction_kernel.available(),
                     reason="no C compiler for the kernel")
 def test_compiled_loop_agrees_with_the_python_reference():
-    """Cubic springs and friction together: the C kernel and the Python loop give the same
-    states to round-off (a stiff, sticking case: 2 mm/s smoothing, 20 N on the frame)."""
+    """Quadratic and cubic springs and friction together, the springs' centres away from the
+    start (their tension not zero there): the C kernel and the Python loop give the same states
+    to round-off (a stiff, sticking case: 2 mm/s smoothing, 20 N on the frame)."""
     structure = NonlinearOscillator(3, friction=True, cubic=True, outputs=OUTPUTS)
     values = {**structure.nominal(), "kc1": 3e3, "kc2": -2e3, "kc3": 5e4, "kq1": 40.0,
               "kq3": -300.0, "F_f1": 20.0, "F_f3": 2.0}
@@ -137,9 +138,11 @@ def test_compiled_loop_agrees_with_the_python_reference():
     springs = np.array([v[f"k{i}"] * v[f"kc{i}"] for i in (1, 2, 3)])
     quadratic = np.array([v[f"k{i}"] * v[f"kq{i}"] for i in (1, 2, 3)])
     friction = np.array([v[f"F_f{i}"] for i in (1, 2, 3)]) / mass
+    centre = np.diff(x0[:3], prepend=0.0) + np.array([2e-3, -1e-3, 5e-4])  # tension at start
     runs = [oscillator_effects._simulate_nonlinear(a, b, u, x0, data.sample_period, 4, "foh",
                                                    friction, structure.v_eps, springs, mass,
-                                                   compiled=flag, quadratic=quadratic)
+                                                   compiled=flag, quadratic=quadratic,
+                                                   centre=centre)
             for flag in (True, False)]
     scale = np.maximum(np.std(runs[1], axis=0), 1e-12)
     assert np.max(np.abs(runs[0] - runs[1]) / scale) < 1e-9

@@ -58,6 +58,7 @@ def test_the_base_spring_reaches_the_outputs_like_the_equivalent_pressure():
     spring2 = (states[:, 1] - states[:, 0] - (states[0, 1] - states[0, 0])) ** 3
     assert np.array_equal(regressors["d2^3"][0], spring2)
 
+
 def _plant_with_a_cubic_base_spring(structure: OscillatorStructure, parameters: dict,
                                     data: IdentificationData, k3: float) -> np.ndarray:
     """The oscillator's linear dynamics plus ``-k3 (z1 - z1(0))^3`` on mass 1, integrated by

@@ -243,7 +243,7 @@ class AugmentedStructure(ModelStructure):
         """Nominal parameters the innermost model moves with this effect's own in a staged refit
         (an oscillator's static balance under a spring term with a non-zero mean); empty
         otherwise."""
-        if self.mode != "inside":
+        if self.mode != "inside" or self.effect != "cubic_stiffness":
             return ()
         return tuple(n for n in getattr(_innermost(self.base), "balance_parameters", ())
                      if n in self.parameter_names)
@@ -662,6 +662,10 @@ def describe_augmentation(structure: AugmentedStructure) -> str:
              INPUT_SIDE else "output side"}[structure.mode]
     if structure.effect == "sensor_inertia" and structure.setting.get("signal"):
         where += f", the mass moves with {structure.setting['signal']}"
+    centres = getattr(_innermost(structure.base), "centres", None)
+    if structure.effect == "cubic_stiffness" and structure.mode == "inside" and centres:
+        where += ", the spring laws centred at deflections " + ", ".join(
+            f"{1e3 * c:.2f}" for c in centres) + " mm"
     return (f"{structure.effect} ({where}; parameters "
             f"{', '.join(structure.effect_parameters) or 'none'})")
 

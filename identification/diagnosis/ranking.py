@@ -88,8 +88,8 @@ def rank_candidates(model: Any, train: IdentificationData, roles: SignalRoles,
         paths.update(mass_paths)
     if "cubic_stiffness" in regressors:
         on_springs, spring_paths = spring_stiffening(model, train)
-        centres = {k: v for k, v in next(iter(on_springs.values()), (None, {}))[1].items()
-                   if k == "centres"}  # every variant's inside form: the same spring laws
+        centres = spring_centres(model, train)  # every variant's inside form: the same laws
+        centres = {} if centres is None else {"centres": centres}
         regressors["cubic_stiffness"] = {
             **{k: (x, {**setting, **centres}) for k, (x, setting)
                in regressors["cubic_stiffness"].items()}, **on_springs}
@@ -266,6 +266,24 @@ def spring_stiffening(model: Any, train: IdentificationData
             regressors[key] = (x, {"spring": i + 1, "centres": centres})
             paths[("cubic_stiffness", key)] = run.path(force, x)
     return regressors, paths
+
+
+def spring_centres(model: Any, train: IdentificationData) -> tuple[float, ...] | None:
+    """The deflections [m] of an oscillator nominal's chain springs at rest at the training run's
+    first input sample (the linear model's equilibrium: the fixed centres of the inside form's
+    spring laws, :class:`~panto.identification.structures.oscillator_effects.
+    NonlinearOscillator`); None for other nominals, for one holding spring terms already (it
+    keeps its own centres) and where the nominal has no rest there."""
+    inner = _bare_nominal(model.structure)
+    if not isinstance(inner, OscillatorStructure) or getattr(inner, "cubic", False):
+        return None
+    values = {k: v for k, v in model.parameters.items() if k in inner.parameter_names}
+    try:
+        rest = OscillatorStructure.equilibrium(inner, values, float(train.input("eta")[0]),
+                                               float(train.input("p")[0]))
+    except (IdentificationError, KeyError, ValueError):
+        return None
+    return tuple(float(d) for d in np.diff(rest[:inner.masses], prepend=0.0))
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

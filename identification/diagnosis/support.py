@@ -371,7 +371,9 @@ def _delta_bic(model: Any, refit: Refit, train: IdentificationData) -> tuple[flo
         s0 = float(np.mean(eps0[valid[:, j], j] ** 2))
         s1 = float(np.mean(eps1[valid[:, j], j] ** 2))
         delta += n_eff[j] * math.log(max(s1, 1e-300) / max(s0, 1e-300))
-    p = len(refit.structure.effect_parameters)
+    free = set(getattr(refit.result, "free", ()))  # a refit of one spring's group: its own count
+    p = sum(1 for n in refit.structure.effect_parameters if n in free) if free else \
+        len(refit.structure.effect_parameters)
     return delta + p * math.log(max(sum(n_eff), 2.0)), n_eff
 
 
@@ -413,7 +415,8 @@ def _significance(effect: str, structure: Any, own: Mapping[str, float],
         return abs(own[name]) / s if s > 0 else (math.inf if s == 0 else 0.0)
 
     single = max(ratio(n) for n in names)
-    names = [n for n in names if std.get(n, math.nan) > 0]  # at a bound or undetermined: out
+    names = [n for n in names  # at a bound (NaN) or undetermined (inf): out
+             if math.isfinite(std.get(n, math.nan)) and std[n] > 0]
     if len(names) < 2 or covariance is None or not set(names) <= set(covariance["names"]):
         return single
     index = [covariance["names"].index(n) for n in names]
@@ -423,16 +426,19 @@ def _significance(effect: str, structure: Any, own: Mapping[str, float],
         return single
     scale = np.sqrt(np.diag(block))  # correlation form: the solve's conditioning is the
     correlation = block / np.outer(scale, scale)  # parameters' own, not their units'
-    try:  # directions the data do not determine (eigenvalues below 1e-10) are left out
+    try:  # a near-zero eigenvalue is a combination of nearly collinear magnitudes (a spring's
+        # quadratic against its cubic term) whose variance the finite-difference Jacobian (about
+        # 1e-7 accurate) cannot resolve: below 1e-7 of the largest such directions are left out
         values, vectors = np.linalg.eigh(correlation)
     except np.linalg.LinAlgError:
         return single
-    kept = values > 1e-10 * values.max()
+    kept = values > 1e-7 * values.max()
     projected = vectors[:, kept].T @ (theta / scale)
     wald = float(np.sum(projected ** 2 / values[kept]))
     if not (math.isfinite(wald) and wald > 0):
         return single
-    joint = float(stats.norm.isf(0.5 * stats.chi2.sf(wald, int(kept.sum()))))
+    tail = max(0.5 * float(stats.chi2.sf(wald, int(kept.sum()))), 1e-300)  # finite beyond
+    joint = float(stats.norm.isf(tail))  # the tail's underflow (z about 37)
     return max(single, joint)
 
 

@@ -10,9 +10,10 @@ oscillator of :mod:`~panto.identification.structures.oscillators` with
 
 - ``coulomb_friction``: ``-F_f,i tanh(v_i / v_eps)`` on every mass ``i`` (``F_f,i`` >= 0 [N]
   fitted, ``v_eps`` held at 1 mm/s: the oscillators' own friction model, eq. 2.35 smoothed);
-- ``cubic_stiffness``: every chain spring ``i`` (base-1, 1-2, 2-3) pulls with
-  ``k_i (d_i - c_i) + k_i (kq_i e^2 + kc_i e^3)``, ``e = d_i - c_i``, where ``d_i`` is its
-  deflection and ``c_i`` a fixed deflection, the spring law's centre (``centres``: the
+- ``cubic_stiffness``: every chain spring ``i`` (base-1, 1-2, 2-3) pulls with its linear
+  force (``k_i d_i``, with the static balance ``F_0``) plus ``k_i (kq_i e^2 + kc_i e^3)``,
+  ``e = d_i - c_i``, where ``d_i`` is its deflection and ``c_i`` a fixed deflection, the
+  spring law's centre (``centres``: the
   diagnosis gives the nominal's static deflection at the training run's first sample, its
   operating point, and keeps it for every other run); ``kc_i`` [1/m^2] is the relative
   symmetric stiffening (``> 0`` hardening, ``< 0`` softening), ``kq_i`` [1/m] the asymmetric
@@ -245,7 +246,12 @@ class NonlinearOscillator(OscillatorStructure):
                 break
             z += step
             if np.max(np.abs(step)) <= 1e-13 * (1.0 + np.max(np.abs(z))):
-                return np.concatenate([z, np.zeros(n)])
+                # a rest, not a saddle: the stiffness there must still hold the masses (a
+                # softening spring past its turning point has a root that is not stable)
+                symmetric = 0.5 * (stiffness + chain + (stiffness + chain).T)
+                if np.all(np.linalg.eigvalsh(symmetric) < 0.0):
+                    return np.concatenate([z, np.zeros(n)])
+                break
         raise IdentificationError(f"{self.name}: no static equilibrium with the spring terms at "
                                   f"eta = {eta:.4g} m, p = {p:.4g} bar")
 

@@ -288,7 +288,9 @@ class OscillatorStructure(ModelStructure):
                 period: float) -> np.ndarray:
         a, b, _, _ = self.matrices(parameters)
         v = self.values(parameters)
-        x0 = self.equilibrium(parameters, u[0, 0], u[0, 1])
+        # the linear model's own rest (a subclass with nonlinear springs rests elsewhere, and its
+        # linear states would start moving)
+        x0 = OscillatorStructure.equilibrium(self, parameters, u[0, 0], u[0, 1])
         if self.friction:
             friction = np.array([v[f"F_f{i + 1}"] / v[f"m{i + 1}"] for i in range(self.masses)])
             return _simulate_friction(a, b, u, x0, period, self.substeps, self.hold,
