@@ -88,7 +88,8 @@ def rank_candidates(model: Any, train: IdentificationData, roles: SignalRoles,
         paths.update(mass_paths)
     if "cubic_stiffness" in regressors:
         on_springs, spring_paths = spring_stiffening(model, train)
-        centres = spring_centres(model, train)  # every variant's inside form: the same laws
+        centres = next((setting["centres"] for _, setting in on_springs.values()), None) \
+            or spring_centres(model, train)  # every variant's inside form: the same laws
         centres = {} if centres is None else {"centres": centres}
         regressors["cubic_stiffness"] = {
             **{k: (x, {**setting, **centres}) for k, (x, setting)
@@ -241,12 +242,13 @@ def spring_stiffening(model: Any, train: IdentificationData
     ``d_i0`` at the run's first sample, the operating point, given in every variant's setting
     as ``centres``: the inside form's fixed centres of the spring laws; the square is the larger
     part of a spring stiffening about its free length under a preload) and their paths to the
-    outputs, the response of the nominal's linear dynamics to that spring's force (pulling mass ``i`` and, above the base, mass ``i-1`` the other way). A
-    spring's force follows its deflection, which no measured position is when the data measure
-    only the contact force or a position the spring does not span. Empty for other nominals, for
-    an oscillator that holds cubic springs already, and for one with friction (once
-    ``coulomb_friction`` is accepted a cubic spring is ranked from the measured position's cube
-    alone, as :func:`mass_friction` is empty there)."""
+    outputs, the response of the nominal's linear dynamics to that spring's force (pulling mass
+    ``i`` and, above the base, mass ``i-1`` the other way). A spring's force follows its
+    deflection, which no measured position is when the data measure only the contact force or a
+    position the spring does not span. Empty for other nominals, for an oscillator that holds
+    spring terms already, and for one with friction (once ``coulomb_friction`` is accepted a
+    cubic spring is ranked from the measured position's cube alone, as :func:`mass_friction` is
+    empty there; :func:`spring_centres` then gives the centres)."""
     run = None if getattr(_bare_nominal(model.structure), "cubic", False) else \
         _oscillator_run(model, train)
     if run is None:

@@ -13,9 +13,9 @@ oscillator of :mod:`~panto.identification.structures.oscillators` with
 - ``cubic_stiffness``: every chain spring ``i`` (base-1, 1-2, 2-3) pulls with its linear
   force (``k_i d_i``, with the static balance ``F_0``) plus ``k_i (kq_i e^2 + kc_i e^3)``,
   ``e = d_i - c_i``, where ``d_i`` is its deflection and ``c_i`` a fixed deflection, the
-  spring law's centre (``centres``: the
-  diagnosis gives the nominal's static deflection at the training run's first sample, its
-  operating point, and keeps it for every other run); ``kc_i`` [1/m^2] is the relative
+  spring law's centre (``centres``: the diagnosis gives the nominal's static deflection at the
+  training run's first sample, its operating point, and keeps it for every other run);
+  ``kc_i`` [1/m^2] is the relative
   symmetric stiffening (``> 0`` hardening, ``< 0`` softening), ``kq_i`` [1/m] the asymmetric
   one (stiffer when stretched than when compressed, or the other way). A run that starts
   elsewhere starts in the nonlinear static equilibrium (Newton from the linear one). The law is
@@ -222,8 +222,9 @@ class NonlinearOscillator(OscillatorStructure):
         springs, quadratic = terms
         n = self.masses
         a, b, _, _ = self.matrices(parameters)
-        stiffness = a[n:, :n] * np.array([v[f"m{i + 1}"] for i in range(n)])[:, None]
-        load = (b[n:] @ np.array([eta, p, 1.0])) * np.array([v[f"m{i + 1}"] for i in range(n)])
+        mass = np.array([v[f"m{i + 1}"] for i in range(n)])
+        stiffness = a[n:, :n] * mass[:, None]  # forces [N] per displacement, and at rest:
+        load = (b[n:] @ np.array([eta, p, 1.0])) * mass
         centres = np.array(self.centres)
         z = x0[:n].copy()
         for _ in range(50):
@@ -232,14 +233,8 @@ class NonlinearOscillator(OscillatorStructure):
             slope = (2.0 * quadratic + 3.0 * springs * e) * e
             force = stiffness @ z + load - tension
             force[:-1] += tension[1:]
-            # d(force)/dz: each spring's slope pulls both its masses (chain: e_i = z_i - z_i-1)
-            chain = np.zeros((n, n))
-            for i in range(n):
-                chain[i, i] -= slope[i]
-                if i > 0:
-                    chain[i, i - 1] += slope[i]
-                    chain[i - 1, i] += slope[i]
-                    chain[i - 1, i - 1] -= slope[i]
+            # d(force)/dz: each spring's slope pulls both its masses, as a chain of springs
+            chain = -self._chain(slope)
             try:
                 step = np.linalg.solve(stiffness + chain, -force)
             except np.linalg.LinAlgError:
