@@ -158,6 +158,7 @@ def simulating(structure: ModelStructure, name: str) -> ModelStructure | None:
         twin = copy.copy(structure)
         twin.base = base
         twin._with_sensor, twin._with_acceleration = None, {}  # its own, of its own base
+        twin._linear_data = None
     elif name in getattr(structure, "simulable_outputs", ()):
         twin = copy.copy(structure)
     else:
@@ -196,6 +197,9 @@ class AugmentedStructure(ModelStructure):
         self.base, self.mode = nominal, "wrapper"
         self._with_sensor: ModelStructure | None = None  # the base simulating the sensor's side
         self._with_acceleration: dict[str, ModelStructure | None] = {}  # ... or its acceleration
+        # (data, the same with the acceleration's name among its outputs) of the last
+        # linear_system call
+        self._linear_data: tuple[IdentificationData, IdentificationData] | None = None
         self._starts: dict[str, float] = {}
         self._bounds: dict[str, tuple[float, float]] = {}
         self.difference_step = getattr(nominal, "difference_step", 1e-6)
@@ -360,6 +364,10 @@ class AugmentedStructure(ModelStructure):
         values.update(self._bounds)
         return values
 
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickled and copied without the last linear_system call's data (a whole run)."""
+        return {**self.__dict__, "_linear_data": None}
+
     @property
     def hold(self) -> str:
         """The input hold of the structure this one wraps (its frequency response's)."""
@@ -377,8 +385,11 @@ class AugmentedStructure(ModelStructure):
         inner = {k: v for k, v in parameters.items() if k not in self._bounds}
         mass = float({**self._starts, **parameters}[f"sensor_inertia:{self._force()}"])
         names = tuple(data.output_names) + (exact.output_names[-1],)
-        a, b, c, d = exact.linear_system(inner, dataclasses.replace(
-            data, outputs=np.zeros((len(data), len(names))), output_names=names))
+        held = self._linear_data  # the same data for every call of one frequency mapping
+        if held is None or held[0] is not data or held[1].output_names != names:
+            held = self._linear_data = (data, dataclasses.replace(
+                data, outputs=np.zeros((len(data), len(names))), output_names=names))
+        a, b, c, d = exact.linear_system(inner, held[1])
         c, d = np.array(c, float), np.array(d, float)
         if self._force() in data.output_names:
             target = data.output_names.index(self._force())

@@ -211,9 +211,14 @@ class OscillatorStructure(ModelStructure):
         forcing[0, 1] = v["p_gain"]
         forcing[0, 2] = v["F_0"]
         forcing[-1, 2] -= k_e * y_0
-        a = np.block([[np.zeros((n, n)), np.eye(n)],
-                      [-stiffness / mass[:, None], -damping / mass[:, None]]])
-        b = np.vstack([np.zeros((n, 3)), forcing / mass[:, None]])
+        # assembled in place (``np.block``/``vstack`` cost more than the arithmetic: this runs
+        # for every column of the frequency mapping's Jacobians)
+        a = np.zeros((2 * n, 2 * n))
+        a[:n, n:] = np.eye(n)
+        a[n:, :n] = -stiffness / mass[:, None]
+        a[n:, n:] = -damping / mass[:, None]
+        b = np.zeros((2 * n, 3))
+        b[n:] = forcing / mass[:, None]
         c = np.zeros((3, 2 * n))
         c[0, n - 2] = c[1, n - 1] = 1.0
         c[2, n - 1] = k_e
@@ -265,6 +270,10 @@ class OscillatorStructure(ModelStructure):
     def equilibrium(self, parameters: Mapping[str, float], eta: float, p: float) -> np.ndarray:
         """Static equilibrium state ``[z; 0]`` for constant inputs (friction is zero at rest)."""
         a, b, _, _ = self.matrices(parameters)
+        return self._rest(a, b, eta, p)
+
+    def _rest(self, a: np.ndarray, b: np.ndarray, eta: float, p: float) -> np.ndarray:
+        """The linear model ``(a, b)``'s static state for constant inputs."""
         try:
             x0 = -linalg.solve(a, b @ np.array([eta, p, 1.0]))
         except (linalg.LinAlgError, ValueError) as error:
@@ -284,13 +293,15 @@ class OscillatorStructure(ModelStructure):
         u = np.column_stack([data.input(name) for name in INPUT_NAMES] + [np.ones(len(data))])
         return self._states(parameters, u, data.sample_period)
 
-    def _states(self, parameters: Mapping[str, float], u: np.ndarray,
-                period: float) -> np.ndarray:
-        a, b, _, _ = self.matrices(parameters)
+    def _states(self, parameters: Mapping[str, float], u: np.ndarray, period: float,
+                system: tuple[np.ndarray, ...] | None = None) -> np.ndarray:
+        """The free run's states; `system`: ``self.matrices(parameters)`` when the caller has
+        them already."""
+        a, b, _, _ = self.matrices(parameters) if system is None else system
         v = self.values(parameters)
         # the linear model's own rest (a subclass with nonlinear springs rests elsewhere, and its
         # linear states would start moving)
-        x0 = OscillatorStructure.equilibrium(self, parameters, u[0, 0], u[0, 1])
+        x0 = self._rest(a, b, u[0, 0], u[0, 1])
         if self.friction:
             friction = np.array([v[f"F_f{i + 1}"] / v[f"m{i + 1}"] for i in range(self.masses)])
             return _simulate_friction(a, b, u, x0, period, self.substeps, self.hold,
@@ -302,9 +313,9 @@ class OscillatorStructure(ModelStructure):
     def simulate_inputs(self, parameters: Mapping[str, float], u: np.ndarray,
                         period: float) -> np.ndarray:
         """Free run for input samples ``u`` (columns eta, p, 1) every `period` seconds."""
-        a, b, c, d = self.matrices(parameters)
+        a, b, c, d = system = self.matrices(parameters)
         v = self.values(parameters)
-        states = self._states(parameters, u, period)
+        states = self._states(parameters, u, period, system)
         if any(o in ACCELERATIONS for o in self.output_names):
             if self.friction:
                 raise IdentificationError(f"{self.name}: no exact acceleration with friction")
