@@ -206,6 +206,14 @@ def _candidate(context: _Context, ranked: _OutputRanking, key: str, score: Any) 
     through = equivalent_input(context.model.structure, score.effect)
     if through:
         setting["input_scale"] = float(np.std(context.train.input(through))) or 1.0
+    if score.effect == "sensor_inertia":
+        placements = {v_setting.get("signal") for _, v_setting in ranked.split[key].values()}
+        other = sorted(p for p in placements if p and p != setting.get("signal")
+                       and p in context.signals)
+        if other:  # the sensor's other placement (the wire's or the head's), refitted beside
+            setting["other_placement"] = {"signal": other[0], "acceleration_scale": float(
+                np.std(sensor_acceleration(context.signals[other[0]],
+                                           context.train.sample_period))) or 1.0}
     return {"effect": score.effect, "variant": score.variant, "err": float(score.err),
             "significant": bool(score.significant), "output": ranked.output, "setting": setting}
 
