@@ -475,6 +475,9 @@ def _search(model: Model, before: np.ndarray, candidates: Sequence[str], search:
             say(f"diagnose: round {round_index + 1}: the linear black box validates more than "
                 f"{LINEAR_SHORTFALL:g} points better: every candidate adding dynamics is refitted "
                 f"on every input it can enter ({ranking['appended']} beyond the ranked ones)")
+        if ranking.get("rivals"):
+            say(f"diagnose: round {round_index + 1}: refitted beside their ranked rivals: "
+                + ", ".join(ranking["rivals"]))
         ranking["top"] += _predicted_contact_loss(ranking["top"], remaining, roles, validation,
                                                   current)
         say(f"diagnose: round {round_index + 1}: ranked on the training residual: " +
