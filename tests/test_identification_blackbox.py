@@ -133,10 +133,32 @@ def test_bad_order_and_too_few_samples():
 def test_a_mode_at_one_starts_at_rest_instead_of_failing():
     """An integrator mode (pole exactly at 1) has no steady state for a constant input: the
     filter then starts at rest on the input's deviation (a held-out diagnosis case crashed here
-    with a singular matrix)."""
-    from panto.identification.structures.blackbox import _steady_filter
+    with a singular matrix); the same for a second-order block with a root at 1."""
+    from panto.identification.structures.blackbox import _steady_first, _steady_pair
 
     x = np.array([2.0, 2.0, 3.0, 3.0, 3.0])
-    assert np.allclose(_steady_filter([0.0, 1.0], [1.0, -1.0], x), [0.0, 0.0, 0.0, 1.0, 2.0])
+    assert np.allclose(_steady_first(1.0, x), [0.0, 0.0, 0.0, 1.0, 2.0])
     # a stable mode still starts in its steady state: 1 / (1 - 0.5) times the input
-    assert np.allclose(_steady_filter([0.0, 1.0], [1.0, -0.5], x)[:3], [4.0, 4.0, 4.0])
+    assert np.allclose(_steady_first(0.5, x)[:3], [4.0, 4.0, 4.0])
+    first, second = _steady_pair([1.0, -1.5, 0.5], x)  # roots 1 and 0.5
+    assert np.allclose(first, [0.0, 0.0, 0.0, 1.0, 2.5]) and np.allclose(second[1:], first[:-1])
+
+
+def test_the_closed_form_steady_start_is_scipys():
+    """The black box's filters started in the steady state in closed form (blackbox.py
+    ``_steady_pair``, ``_steady_first``) against SciPy's own path, ``lfilter`` from
+    ``lfilter_zi`` (a linear solve), for random stable blocks: the same to rounding."""
+    from panto.identification.structures.blackbox import _steady_first, _steady_pair
+
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        x = 3.0 * rng.normal() + rng.normal(size=400)
+        radius, angle = rng.uniform(0.1, 0.99), rng.uniform(0.0, np.pi)
+        a = [1.0, -2.0 * radius * np.cos(angle), radius ** 2]
+        for b, mine in zip(([0.0, 1.0, 0.0], [0.0, 0.0, 1.0]), _steady_pair(a, x)):
+            theirs, _ = signal.lfilter(b, a, x, zi=signal.lfilter_zi(b, a) * x[0])
+            assert np.max(np.abs(mine - theirs)) < 1e-12 * np.max(np.abs(theirs))
+        pole = rng.uniform(-0.99, 0.99)
+        theirs, _ = signal.lfilter([0.0, 1.0], [1.0, -pole], x,
+                                   zi=signal.lfilter_zi([0.0, 1.0], [1.0, -pole]) * x[0])
+        assert np.max(np.abs(_steady_first(pole, x) - theirs)) < 1e-12 * np.max(np.abs(theirs))

@@ -114,8 +114,7 @@ class BlockModel:
                 a, c = tr / 2, tr * tr / 4 - det
                 den = [1.0, -tr, det]
                 for j in range(m):
-                    g1 = _steady_filter([0.0, 1.0, 0.0], den, u[:, j])
-                    g2 = _steady_filter([0.0, 0.0, 1.0], den, u[:, j])
+                    g1, g2 = _steady_pair(den, u[:, j])
                     basis[:, row, row, j] = g1 - a * g2
                     basis[:, row + 1, row, j] = c * g2
                     basis[:, row, row + 1, j] = g2
@@ -123,7 +122,7 @@ class BlockModel:
                 row += 2
             else:
                 for j in range(m):
-                    basis[:, row, row, j] = _steady_filter([0.0, 1.0], [1.0, -coefficient], u[:, j])
+                    basis[:, row, row, j] = _steady_first(coefficient, u[:, j])
                 row += 1
         return basis
 
@@ -134,15 +133,33 @@ class BlockModel:
         return states @ c.T + u @ d.T + offset
 
 
-def _steady_filter(b: Sequence[float], a: Sequence[float], x: np.ndarray) -> np.ndarray:
-    """``lfilter`` started in the steady state for the constant input ``x[0]``; a mode at
-    exactly 1 (an integrator: no steady state for a constant input) starts at rest on the
-    input's deviation from ``x[0]`` instead."""
-    try:
-        zi = signal.lfilter_zi(b, a) * x[0]
-    except np.linalg.LinAlgError:
-        return signal.lfilter(b, a, np.asarray(x, float) - x[0])
-    y, _ = signal.lfilter(b, a, x, zi=zi)
+def _steady_pair(a: Sequence[float], x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """`x` filtered through ``z^-1 / a(z)`` and ``z^-2 / a(z)`` (`a` of second order), started
+    in the steady state for the constant input ``x[0]`` (a mode at exactly 1, an integrator
+    with no steady state, at rest on the input's deviation from ``x[0]``): one filter, the
+    second the first delayed by a sample. The steady state in closed form (``lfilter_zi``'s
+    linear solve and companion matrix cost more than the filter itself: this runs for every
+    column of the black box's Jacobian); the same as ``lfilter`` from ``lfilter_zi`` to
+    rounding (tests/test_identification_blackbox.py)."""
+    total = float(a[0] + a[1] + a[2])
+    if total == 0.0:  # an integrator: at rest on the input's deviation from x[0]
+        first = signal.lfilter([0.0, 1.0, 0.0], a, np.asarray(x, float) - x[0])
+        before = 0.0
+    else:  # transposed direct form II at rest: z0 = y, z1 = -a2 y, y = x[0] / a(1)
+        before = float(x[0]) / total
+        first, _ = signal.lfilter([0.0, 1.0, 0.0], a, x, zi=[before, -a[2] * before])
+    second = np.empty_like(first)
+    second[0], second[1:] = before, first[:-1]
+    return first, second
+
+
+def _steady_first(pole: float, x: np.ndarray) -> np.ndarray:
+    """`x` filtered through ``z^-1 / (1 - pole z^-1)`` from the steady state of ``x[0]`` (at
+    rest on the deviation for a pole at 1), the steady state in closed form (as
+    :func:`_steady_pair`)."""
+    if pole == 1.0:
+        return signal.lfilter([0.0, 1.0], [1.0, -pole], np.asarray(x, float) - x[0])
+    y, _ = signal.lfilter([0.0, 1.0], [1.0, -pole], x, zi=[float(x[0]) / (1.0 - pole)])
     return y
 
 
