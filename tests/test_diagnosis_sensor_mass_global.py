@@ -120,7 +120,9 @@ def test_a_sensor_mass_is_refitted_in_the_head_as_well_as_on_the_wire():
                       progress=lines.append)
     tried = {line.split(":")[0].strip() for line in lines if "dBIC" in line}
     assert {"sensor_inertia@eta", "sensor_inertia@xi"} <= tried, tried
+    assert any(line.strip().startswith("sensor_inertia: kept on xi''") for line in lines), lines
     assert result.effects[:1] == ("sensor_inertia",), result.summary
+    assert "the mass moves with xi" in result.steps[0].description, result.steps[0].description
     truth = case.plant.setting["m_s"]
     assert abs(-result.final_parameters["sensor_inertia:F_c"] - truth) < 0.02 * truth, \
         (result.final_parameters["sensor_inertia:F_c"], truth)

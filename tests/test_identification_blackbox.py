@@ -142,6 +142,12 @@ def test_a_mode_at_one_starts_at_rest_instead_of_failing():
     assert np.allclose(_steady_first(0.5, x)[:3], [4.0, 4.0, 4.0])
     first, second = _steady_pair([1.0, -1.5, 0.5], x)  # roots 1 and 0.5
     assert np.allclose(first, [0.0, 0.0, 0.0, 1.0, 2.5]) and np.allclose(second[1:], first[:-1])
+    # a root at 1 whose coefficients' sum rounds to 1e-17 (a saturated tanh-bounded block)
+    det = 0.1
+    trace = (1.0 + det) * np.tanh(25.0)
+    assert 0.0 < abs(1.0 - trace + det) < 1e-15
+    first, second = _steady_pair([1.0, -trace, det], x)
+    assert np.max(np.abs(first)) < 10.0 and first[0] == 0.0 and second[0] == 0.0
 
 
 def test_the_closed_form_steady_start_is_scipys():

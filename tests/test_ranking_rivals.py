@@ -30,7 +30,7 @@ class Score:
     significant: bool = False
 
 
-def _ranked(monkeypatch, scores, max_refits):
+def _ranked(monkeypatch, scores, max_refits, every=()):
     """The ranking of a two-mass nominal with the per-output `scores` in place of FROLS'."""
     monkeypatch.setattr(ranking, "_rank_output", lambda context, output, *rest: SimpleNamespace(
         ranking=SimpleNamespace(first_step=scores, to_dict=dict), output=output))
@@ -47,7 +47,7 @@ def _ranked(monkeypatch, scores, max_refits):
                               + rng.normal(size=(t.size, 1)), ("eta", "p"), ("F_c",))
     model = Model(structure, structure.nominal(), ("F_0", "p_gain"))
     candidates = ["extra_mode", "sensor_inertia", "input_delay", "actuator_lag"]
-    return rank_candidates(model, data, ROLES, candidates, max_refits)
+    return rank_candidates(model, data, ROLES, candidates, max_refits, every)
 
 
 def test_a_sensor_mass_ranked_below_the_refits_follows_an_extra_mode(monkeypatch):
@@ -72,3 +72,17 @@ def test_no_sensor_mass_is_appended_without_an_extra_mode_in_the_head(monkeypatc
     assert [c["effect"] for c in result["top"]] == ["input_delay", "actuator_lag", "extra_mode",
                                                     "sensor_inertia"]
     assert result["rivals"] == []
+
+
+def test_a_sensor_mass_above_the_floor_but_beyond_the_refits_follows_as_well(monkeypatch):
+    """The mass ranked fourth of two refits with an ERR above the floor: appended once; with
+    the candidates adding dynamics appended anyway (``every``), it comes with them, counted
+    among them, not twice."""
+    scores = [Score("extra_mode", "mode", 0.3), Score("input_delay@eta", "delay", 0.2),
+              Score("actuator_lag@eta", "lag", 0.1), Score("sensor_inertia", "xi''", 0.05)]
+    result = _ranked(monkeypatch, scores, 2)
+    assert [c["effect"] for c in result["top"]] == ["extra_mode", "input_delay", "sensor_inertia"]
+    assert result["rivals"] == ["sensor_inertia"]
+    result = _ranked(monkeypatch, scores, 2, every=("extra_mode", "sensor_inertia"))
+    assert [c["effect"] for c in result["top"]] == ["extra_mode", "input_delay", "sensor_inertia"]
+    assert result["rivals"] == [] and result["appended"] == 1

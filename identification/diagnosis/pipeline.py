@@ -35,7 +35,10 @@ causes it, and how far the gap shrinks once that effect is in the model.
    from the structure's defaults, or by the nominal's own global method where the augmented
    structure gives its frequency response (a sensor mass on a simulated head:
    :func:`~panto.identification.diagnosis.refit.global_refit`); a passing refit is kept unless the
-   second passes too with a lower training cost.
+   second passes too with a lower training cost. An extra mode's rival, a sensor mass (one
+   parameter for the same high-frequency signature), is refitted whenever the mode is
+   (:data:`~panto.identification.diagnosis.ranking.RIVALS`), and a sensor mass at both
+   placements, on the wire and in the head, the lower training cost kept.
    An effect is accepted only when (a) ``dBIC < -10``, ``BIC = sum_j N_eff,j ln sigma_j^2 + p ln
    N_eff`` on the training residuals, ``N_eff`` from the augmented model's residual; (b) its
    magnitude parameter is significant, ``|theta| / sigma_theta > 3``, ``sigma_theta`` inflated by
@@ -100,7 +103,7 @@ from panto.identification.diagnosis.nominal import (Progress, adequacy_quietly, 
                                                     fit_per_output, indented, simulate)
 from panto.identification.diagnosis.parallel import map_trials, resolve_workers, trial_pool
 from panto.identification.diagnosis.augmentations import INPUT_SIDE
-from panto.identification.diagnosis.ranking import rank_candidates
+from panto.identification.diagnosis.ranking import RIVALS, rank_candidates
 from panto.identification.diagnosis.refit import (ADDS_DYNAMICS, LINEAR_SHORTFALL, Model, Search,
                                                   Trial, lacks_linear_dynamics, try_candidate)
 from panto.identification.diagnosis.residual_analysis import (ErrorModelOptions, OutputAnalysis,
@@ -255,7 +258,9 @@ class DiagnosisOptions:
     max_effects: int = 3
     """Effects accepted at most (rounds of the search)."""
     max_refits: int = 5
-    """Candidates refitted per round."""
+    """Ranked candidates refitted per round (the ones refitted whatever their rank come on
+    top: every candidate adding dynamics while the linear black box shows them missing, and
+    the rivals of a ranked one)."""
     folds: int = 4
     """Blocked folds of the validation run for the improvement's spread."""
     max_evaluations: int = 400
@@ -476,8 +481,9 @@ def _search(model: Model, before: np.ndarray, candidates: Sequence[str], search:
                 f"{LINEAR_SHORTFALL:g} points better: every candidate adding dynamics is refitted "
                 f"on every input it can enter ({ranking['appended']} beyond the ranked ones)")
         if ranking.get("rivals"):
-            say(f"diagnose: round {round_index + 1}: refitted beside their ranked rivals: "
-                + ", ".join(ranking["rivals"]))
+            say(f"diagnose: round {round_index + 1}: " + ", ".join(
+                f"{r} refitted beside {', '.join(k for k, v in RIVALS.items() if r in v)} "
+                "(its ranked rival)" for r in ranking["rivals"]))
         ranking["top"] += _predicted_contact_loss(ranking["top"], remaining, roles, validation,
                                                   current)
         say(f"diagnose: round {round_index + 1}: ranked on the training residual: " +

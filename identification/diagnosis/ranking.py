@@ -63,7 +63,11 @@ def rank_candidates(model: Any, train: IdentificationData, roles: SignalRoles,
     The effects in `every` are refitted whatever their ERR, each on every input it can enter
     (its best variant there), after the `max_refits` (the search asks for this when the linear
     black box shows dynamics the model lacks:
-    :func:`~panto.identification.diagnosis.refit.lacks_linear_dynamics`).
+    :func:`~panto.identification.diagnosis.refit.lacks_linear_dynamics`). The rivals
+    (:data:`RIVALS`) of a ranked candidate follow them, whatever their ERR (``"rivals"`` names
+    them). A sensor mass offered at two placements (the wire's and the head's) carries the
+    other one as ``other_placement`` (its variant and setting), refitted beside it
+    (:func:`~panto.identification.diagnosis.refit.try_candidate`).
 
     A regressor is scored as it reaches the output: through the linear OE model's filter, or,
     for any other nominal, through the nominal's own response to the input it enters
@@ -210,16 +214,23 @@ def _candidate(context: _Context, ranked: _OutputRanking, key: str, score: Any) 
     through = equivalent_input(context.model.structure, score.effect)
     if through:
         setting["input_scale"] = float(np.std(context.train.input(through))) or 1.0
+    candidate = {"effect": score.effect, "variant": score.variant, "err": float(score.err),
+                 "significant": bool(score.significant), "output": ranked.output,
+                 "setting": setting}
     if score.effect == "sensor_inertia":
-        placements = {v_setting.get("signal") for _, v_setting in ranked.split[key].values()}
-        other = sorted(p for p in placements if p and p != setting.get("signal")
-                       and p in context.signals)
-        if other:  # the sensor's other placement (the wire's or the head's), refitted beside
-            setting["other_placement"] = {"signal": other[0], "acceleration_scale": float(
-                np.std(sensor_acceleration(context.signals[other[0]],
-                                           context.train.sample_period))) or 1.0}
-    return {"effect": score.effect, "variant": score.variant, "err": float(score.err),
-            "significant": bool(score.significant), "output": ranked.output, "setting": setting}
+        other = next((label for label, (_, v_setting) in sorted(ranked.split[key].items())
+                      if v_setting.get("signal") not in (None, setting.get("signal"))
+                      and v_setting.get("signal") in context.signals), None)
+        if other is not None:  # the other placement (the wire's or the head's), refitted beside
+            there = dataclasses.replace(score, variant=other,
+                                        setting=dict(ranked.split[key][other][1]))
+            coefficient = _coefficient(ranked.split[key][other][0], ranked.target, ranked.base,
+                                       ranked.sensitivity)
+            candidate["other_placement"] = {
+                "variant": other, "setting": _setting(there, ranked.output, coefficient,
+                                                      context.signals, context.train,
+                                                      context.roles, context.drive)}
+    return candidate
 
 
 def mass_friction(model: Any, train: IdentificationData

@@ -110,21 +110,24 @@ class Search:
 def try_candidate(model: Model, candidate: Mapping[str, Any], current: np.ndarray,
                   search: Search) -> tuple[Trial, Model, np.ndarray]:
     """Refit the nominal with one candidate and judge it (`current`: the model's free run on the
-    validation run). A sensor mass offered at two placements (``setting["other_placement"]``:
-    on the wire's side, moving with the input ``eta``, and inside the head, moving with ``xi``)
-    is refitted at both and the lower training cost kept: one parameter either way, and the
+    validation run). A sensor mass offered at two placements (the candidate's
+    ``other_placement``: its variant and setting; on the wire's side, moving with the input
+    ``eta``, and inside the head, moving with ``xi``) is refitted at both and the lower
+    training cost kept: one parameter either way, and the
     ranking's choice between them rests on second differences of both signals (seen held-out
     two-mass/sensor_inertia/2106: a 1.04 kg mass in the head refitted on ``eta''`` gained
     +0.35 points and lost to an extra mode's +0.71; on the head it reached 1.03 kg, +0.73)."""
     first = _try_one(model, candidate, current, search)
-    other = candidate.get("setting", {}).get("other_placement")
-    if candidate["effect"] != "sensor_inertia" or not other:
+    other = candidate.get("other_placement")
+    if not other:
         return first
-    setting = {k: v for k, v in candidate["setting"].items() if k != "other_placement"}
-    second = _try_one(model, {**candidate, "setting": {**setting, **other}}, current, search)
+    second = _try_one(model, {**candidate, **other}, current, search)
     costs = [_training_cost(new.structure, search.train, new.parameters)
              if trial.parameters else math.inf for trial, new, _ in (first, second)]
-    return second if costs[1] < costs[0] else first
+    kept = second if costs[1] < costs[0] else first
+    search.say(f"  {candidate['effect']}: kept on {kept[0].variant} (training cost "
+               f"{min(costs):.6g} against {max(costs):.6g})")
+    return kept
 
 
 def _try_one(model: Model, candidate: Mapping[str, Any], current: np.ndarray,
@@ -167,20 +170,28 @@ def _try_one(model: Model, candidate: Mapping[str, Any], current: np.ndarray,
                 candidate, structure, model, free, (trial, result, new, simulated), current,
                 search)
     except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError) as error:
-        say(f"  {effect}: rejected: {stage} ({error})")
+        say(f"  {effect}{'@' + _where(candidate) if _where(candidate) else ''}: rejected: "
+            f"{stage} ({error})")
         trial = Trial(effect, candidate["variant"], candidate["err"], effect, {}, {}, math.nan,
                       math.nan, math.nan, (), math.nan, {}, {}, False, (stage,), str(error))
         return trial, model, current
     trial = Trial(**{**trial, "description": describe_augmentation(structure),
                      **linear_explains(effect, trial, search.linear_level)})
-    where = candidate.get("setting", {}).get("input") if effect in INPUT_SIDE else \
-        candidate.get("setting", {}).get("signal") if effect == "sensor_inertia" else None
+    where = _where(candidate)
     say(f"  {effect}{'@' + where if where else ''}: dBIC {trial.delta_bic:.1f}, "
         f"|theta|/sigma {trial.significance:.1f}, "
         f"validation +{trial.improvement:.2f} points (fold spread {trial.fold_spread:.2f}): "
         + ("accepted" + (f" on the {trial.evidence}" if trial.evidence else "")
            if trial.accepted else "rejected (" + ", ".join(trial.failed) + ")"))
     return trial, new, simulated
+
+
+def _where(candidate: Mapping[str, Any]) -> str | None:
+    """Where a candidate acts, for the progress lines: the input of an input-side effect, the
+    signal a sensor mass moves with."""
+    setting = candidate.get("setting", {})
+    return setting.get("input") if candidate["effect"] in INPUT_SIDE else \
+        setting.get("signal") if candidate["effect"] == "sensor_inertia" else None
 
 
 #: How many times the candidates' budget a refit that stopped on it may continue when it could be
@@ -202,6 +213,7 @@ def continue_refit(candidate: Mapping[str, Any], entry: tuple[Trial, Model, np.n
     trial, new, _ = entry
     if not stopped_on_budget(trial) or trial.continuation:
         return entry
+    candidate = {**candidate, "variant": trial.variant}  # the placement kept (try_candidate)
     budget = int(search.fit_options.get("max_evaluations") or 400) * CONTINUATION_FACTOR
 
     def unchanged(why: str) -> tuple[Trial, Model, np.ndarray]:

@@ -134,15 +134,16 @@ class BlockModel:
 
 
 def _steady_pair(a: Sequence[float], x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """`x` filtered through ``z^-1 / a(z)`` and ``z^-2 / a(z)`` (`a` of second order), started
-    in the steady state for the constant input ``x[0]`` (a mode at exactly 1, an integrator
+    """`x` filtered through ``z^-1 / a(z)`` and ``z^-2 / a(z)`` (`a` of second order, ``a[0]``
+    = 1), started in the steady state for the constant input ``x[0]`` (a mode at exactly 1, an integrator
     with no steady state, at rest on the input's deviation from ``x[0]``): one filter, the
     second the first delayed by a sample. The steady state in closed form (``lfilter_zi``'s
     linear solve and companion matrix cost more than the filter itself: this runs for every
     column of the black box's Jacobian); the same as ``lfilter`` from ``lfilter_zi`` to
-    rounding (tests/test_identification_blackbox.py)."""
+    rounding (tests/test_identification_blackbox.py), except next to a root at 1, where the
+    old path's steady state was 1e16 times the input (:func:`_at_one`)."""
     total = float(a[0] + a[1] + a[2])
-    if total == 0.0:  # an integrator: at rest on the input's deviation from x[0]
+    if _at_one(total, a):  # an integrator: at rest on the input's deviation from x[0]
         first = signal.lfilter([0.0, 1.0, 0.0], a, np.asarray(x, float) - x[0])
         before = 0.0
     else:  # transposed direct form II at rest: z0 = y, z1 = -a2 y, y = x[0] / a(1)
@@ -153,11 +154,19 @@ def _steady_pair(a: Sequence[float], x: np.ndarray) -> tuple[np.ndarray, np.ndar
     return first, second
 
 
+def _at_one(total: float, a: Sequence[float]) -> bool:
+    """Whether ``a(1)`` (`total`, the sum of the denominator `a`, ``a[0] = 1``) is zero to the
+    rounding of that sum: a root at 1 (an integrator). A block whose ``tanh``-bounded
+    coefficients saturate puts a root there exactly while the sum comes out 1e-17 instead of 0,
+    and its steady state 1e16 times the input."""
+    return abs(total) <= 8.0 * np.finfo(float).eps * sum(abs(float(c)) for c in a)
+
+
 def _steady_first(pole: float, x: np.ndarray) -> np.ndarray:
     """`x` filtered through ``z^-1 / (1 - pole z^-1)`` from the steady state of ``x[0]`` (at
     rest on the deviation for a pole at 1), the steady state in closed form (as
     :func:`_steady_pair`)."""
-    if pole == 1.0:
+    if _at_one(1.0 - pole, (1.0, pole)):
         return signal.lfilter([0.0, 1.0], [1.0, -pole], np.asarray(x, float) - x[0])
     y, _ = signal.lfilter([0.0, 1.0], [1.0, -pole], x, zi=[float(x[0]) / (1.0 - pole)])
     return y
