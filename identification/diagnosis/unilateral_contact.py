@@ -385,6 +385,11 @@ class UnilateralContact(ModelStructure):
         self.parameter_names = tuple(nominal.parameter_names)
         self.difference_step = getattr(nominal, "difference_step", 1e-6)
 
+    #: What :meth:`simulate` gives (the oscillator's exact accelerations are not among them:
+    #: the contact switches its dynamics; a sensor mass on the head then takes the second
+    #: difference of the head, as on any structure without them).
+    simulable_outputs = ("y_cb", "xi", "F_c")
+
     def __getattr__(self, name: str):
         if name.startswith("__") or "nominal_structure" not in self.__dict__:
             raise AttributeError(name)
