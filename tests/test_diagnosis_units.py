@@ -107,6 +107,24 @@ def test_report_records_and_shows_the_units(tmp_path):
     assert "<td>extra_mode:gain</td><td>12.5</td><td>–</td><td>N/m</td>" in html
 
 
+def test_a_parameter_the_run_does_not_determine_says_so(tmp_path):
+    """A refit's standard deviation that is not finite (a saturation's lower limit that no
+    sample reaches ran to its bound, seen held-out 2155: -4581 N, deviation NaN) is written as
+    not determined, in the markdown and the HTML, never as a number."""
+    from panto.identification.diagnosis.report import NOT_DETERMINED
+
+    diagnosis = _diagnosis()
+    step = diagnosis.steps[1]
+    step.std.update({"extra_mode:gain": float("nan"), "extra_mode:damping": float("inf")})
+    paths = write_report(diagnosis, tmp_path, units={"eta": "m", "F_c": "N", "y_cb": "m"})
+    markdown = paths["markdown"].read_text()
+    assert f"| extra_mode:gain | 12.5 | {NOT_DETERMINED} | N/m |" in markdown
+    assert f"| extra_mode:damping | 0.05 | {NOT_DETERMINED} | - |" in markdown
+    assert "| input_delay:eta | 0.02 | 0.001 | s |" in markdown
+    html = paths["html"].read_text()
+    assert f"<td>extra_mode:gain</td><td>12.5</td><td>{NOT_DETERMINED}</td><td>N/m</td>" in html
+
+
 def test_without_data_units_only_the_pantograph_models_lend_theirs(tmp_path):
     """A structure on the rig mapping computes in m, bar and N: those stand in for missing data
     units; another structure's signals stay unknown."""

@@ -149,7 +149,7 @@ def _shrink_blocks(diagnosis: Any, bands: Path | None,
                       [[o, diagnosis.fit_before[o], diagnosis.fit_after[o],
                         _percent(closed[o])] for o in diagnosis.output_names])]
     for step, unit_map in zip(diagnosis.steps, step_unit_maps):
-        rows = [[n, v, step.std.get(n, math.nan), unit_map.get(n, UNKNOWN)]
+        rows = [[n, v, _spread(step, n), unit_map.get(n, UNKNOWN)]
                 for n, v in step.parameters.items()]
         blocks += [t.heading(step.effect), t.paragraph(step.description)]
         if step.evidence:
@@ -176,6 +176,20 @@ def _evidence_text(step: Any) -> str:
             "head that leaves the wire may not follow the record (each landing's instant depends "
             "on the last bits of the state), so the fits below can drop although the contact "
             "force's statistics are reproduced.")
+
+
+def _spread(step: Any, name: str) -> float | str:
+    """A step's parameter's standard deviation; where the refit gave one that is not finite,
+    what that means: the run does not determine it (a limit no sample reaches, a parameter at
+    its bound), never a number (NaN, shown as "–", where none was recorded)."""
+    std = step.std.get(name)
+    if std is None:
+        return math.nan
+    return float(std) if math.isfinite(float(std)) else NOT_DETERMINED
+
+
+#: The spread cell of a parameter the run does not determine.
+NOT_DETERMINED = "not determined by the run"
 
 
 def _not_converged(step: Any) -> str:
@@ -230,8 +244,7 @@ def markdown_report(diagnosis: Any, step_unit_maps: list[Mapping[str, str]]) -> 
             lines += [warning, ""]
         if step.parameters:
             lines += ["| parameter | value | ± (1 σ) | unit |", "|---|---|---|---|"]
-            lines += [f"| {n} | {format_number(v, 5)} | "
-                      f"{format_number(step.std.get(n, math.nan), 3)} | "
+            lines += [f"| {n} | {format_number(v, 5)} | {format_number(_spread(step, n), 3)} | "
                       f"{unit_map.get(n, UNKNOWN)} |" for n, v in step.parameters.items()]
     rejected = [(i + 1, x) for i, round_ in enumerate(diagnosis.rounds)
                 for x in round_.get("tried", ()) if not x.get("accepted")]
