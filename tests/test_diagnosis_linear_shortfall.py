@@ -75,27 +75,13 @@ def test_the_ranked_head_is_the_same_when_extra_effects_fall_below_the_floor(mon
     the ranked head: with a lag on ``p`` just under the floor on two outputs (summed: above a
     delay's single score), the two ranked refits stay the mode and the delay; the lag follows
     them (the per-output scores stand in for the FROLS ranking)."""
-    from dataclasses import dataclass
-    from types import SimpleNamespace
-
-    from panto.identification.diagnosis import ranking
-
-    @dataclass(frozen=True)
-    class Score:
-        effect: str
-        variant: str
-        err: float
-        significant: bool = False
+    from fixtures.ranking_stubs import Score, stub_ranking
 
     scores = {"F_c": [Score("actuator_lag@p", "lag", 0.004), Score("input_delay@eta", "delay",
                                                                       0.0055),
                       Score("extra_mode", "mode", 0.03)],
               "y_cb": [Score("actuator_lag@p", "lag", 0.004), Score("extra_mode", "mode", 0.0)]}
-    monkeypatch.setattr(ranking, "_rank_output", lambda context, output, *rest: SimpleNamespace(
-        ranking=SimpleNamespace(first_step=scores[output], to_dict=dict), output=output))
-    monkeypatch.setattr(ranking, "_candidate", lambda context, ranked, key, score: {
-        "effect": score.effect, "variant": key, "err": score.err,
-        "significant": score.significant, "output": ranked.output, "setting": {}})
+    stub_ranking(monkeypatch, scores)
     structure = OscillatorStructure(3, outputs=OUTPUTS)
     model = Model(structure, structure.nominal(), ("F_0", "p_gain"))
     roles = SignalRoles(position="eta", force="F_c", actuators=("eta", "p"),

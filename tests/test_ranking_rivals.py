@@ -6,12 +6,10 @@ five refits behind an extra mode, never refitted). The per-output scores stand i
 ranking, as in test_diagnosis_linear_shortfall.py."""
 from __future__ import annotations
 
-from dataclasses import dataclass
-from types import SimpleNamespace
-
 import numpy as np
 
-from panto.identification.diagnosis import ranking
+from fixtures.ranking_stubs import Score, stub_ranking
+
 from panto.identification.diagnosis.effects import SignalRoles
 from panto.identification.diagnosis.ranking import rank_candidates
 from panto.identification.diagnosis.refit import Model
@@ -22,21 +20,9 @@ ROLES = SignalRoles(position="eta", force="F_c", actuators=("eta", "p"), sensor_
                     head_position="xi")
 
 
-@dataclass(frozen=True)
-class Score:
-    effect: str
-    variant: str
-    err: float
-    significant: bool = False
-
-
 def _ranked(monkeypatch, scores, max_refits, every=()):
     """The ranking of a two-mass nominal with the per-output `scores` in place of FROLS'."""
-    monkeypatch.setattr(ranking, "_rank_output", lambda context, output, *rest: SimpleNamespace(
-        ranking=SimpleNamespace(first_step=scores, to_dict=dict), output=output))
-    monkeypatch.setattr(ranking, "_candidate", lambda context, ranked, key, score: {
-        "effect": score.effect, "variant": key, "err": score.err,
-        "significant": score.significant, "output": ranked.output, "setting": {}})
+    stub_ranking(monkeypatch, scores)
     rng = np.random.default_rng(0)
     t = np.arange(400) / 50.0
     eta, p = 0.002 * rng.normal(size=t.size), 4.0 + 0.1 * rng.normal(size=t.size)

@@ -158,7 +158,6 @@ def simulating(structure: ModelStructure, name: str) -> ModelStructure | None:
         twin = copy.copy(structure)
         twin.base = base
         twin._with_sensor, twin._with_acceleration = None, {}  # its own, of its own base
-        twin._linear_data = None
     elif name in getattr(structure, "simulable_outputs", ()):
         twin = copy.copy(structure)
     else:
