@@ -376,8 +376,12 @@ class AugmentedStructure(ModelStructure):
                       ) -> tuple[np.ndarray, ...]:
         """Continuous ``(A, B, C, D)`` from `data`'s inputs to its outputs, for a sensor mass
         whose acceleration the wrapped structure gives exactly (:meth:`_exact_acceleration`):
-        the force's rows less the mass times the acceleration's. Raises NotImplementedError for
-        any other effect (a global refit then starts from the defaults and perturbations only)."""
+        the force's rows less the mass times the acceleration's; for an actuator lag on an input
+        of a wrapped structure that gives its own (:meth:`_lagged_system`). Raises
+        NotImplementedError for any other effect (a global refit then starts from the defaults
+        and perturbations only)."""
+        if self.effect == "actuator_lag" and self.mode == "wrapper":
+            return self._lagged_system(parameters, data)
         exact = self._exact_acceleration(data)
         if exact is None or not callable(getattr(exact, "linear_system", None)):
             raise NotImplementedError(f"{self.name}: no linear system for this effect")
@@ -395,6 +399,30 @@ class AugmentedStructure(ModelStructure):
             c[target] -= mass * c[-1]
             d[target] -= mass * d[-1]
         return a, b, c[:-1], d[:-1]
+
+    def _lagged_system(self, parameters: Mapping[str, float], data: IdentificationData
+                       ) -> tuple[np.ndarray, ...]:
+        """The wrapped structure's ``(A, B, C, D)`` behind the lag ``T w' + w = u_j`` on its input
+        ``j``: one state more, ``w``, which drives what ``u_j`` drove; ``u_j`` drives only ``w``.
+        ``A' = [[A, b_j], [0, -1/T]]``, ``B'`` the same as ``B`` with column ``j`` ``[0; 1/T]``,
+        ``C' = [C, d_j]``, ``D'`` with column ``j`` zero. A lag below a millionth of the sample
+        period is none (as :func:`~panto.identification.diagnosis.effects.first_order_lag`)."""
+        if not callable(getattr(self.base, "linear_system", None)):
+            raise NotImplementedError(f"{self.name}: {self.base.name} gives no linear system")
+        inner = {k: v for k, v in parameters.items() if k not in self._bounds}
+        name = self._input()
+        lag = float({**self._starts, **parameters}[f"actuator_lag:{name}"])
+        a, b, c, d = (np.array(m, float) for m in self.base.linear_system(inner, data))
+        if not lag > 1e-6 * data.sample_period:
+            return a, b, c, d
+        j, n = list(data.input_names).index(name), a.shape[0]
+        lagged_a = np.zeros((n + 1, n + 1))
+        lagged_a[:n, :n], lagged_a[:n, n], lagged_a[n, n] = a, b[:, j], -1.0 / lag
+        lagged_b = np.vstack([b, np.zeros((1, b.shape[1]))])
+        lagged_b[:n, j], lagged_b[n, j] = 0.0, 1.0 / lag
+        lagged_d = d.copy()
+        lagged_d[:, j] = 0.0
+        return lagged_a, lagged_b, np.hstack([c, d[:, [j]]]), lagged_d
 
     def simulate(self, parameters: Mapping[str, float], data: IdentificationData) -> np.ndarray:
         own = {k: float(v) for k, v in parameters.items() if k in self._bounds}
