@@ -3,8 +3,9 @@ augmentations.py ``AugmentedStructure._lagged_system``, refit.py ``_second_start
 ``GLOBAL_WHEN_REJECTED``). A nominal fitted without a slow bellow lag bends into the shape of an
 extra mode; a lag refitted from there, or from the defaults, stopped short of the plant and the
 mode was named (seen held-out three-mass/actuator_lag/2120, 0.096 s on the pressure). A lag
-still rejected after the defaults' start now gets the nominal's global method, whose data-driven
-starts match the lagged structure's own frequency response to the data's."""
+that after the defaults' start still leaves the model more than 2 points below the adequacy's
+linear black box now gets the nominal's global method, whose data-driven starts match the lagged
+structure's own frequency response to the data's."""
 from __future__ import annotations
 
 import numpy as np
