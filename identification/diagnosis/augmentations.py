@@ -130,6 +130,16 @@ def _innermost(structure: ModelStructure) -> ModelStructure:
     return structure
 
 
+def mode_carrier(structure: ModelStructure) -> int | None:
+    """The number of the head's mass (the top one) where an extra mass can hang inside
+    `structure`'s dynamics (a linear two-/three-mass oscillator, possibly with effects acting
+    from outside it), else None."""
+    inner = _innermost(structure)
+    if type(inner) is not OscillatorStructure or inner.friction:
+        return None
+    return inner.masses if _has_inside_form(structure, "extra_mode") else None
+
+
 def _has_inside_form(nominal: ModelStructure, effect: str) -> bool:
     if isinstance(nominal, AugmentedStructure):
         return nominal.supports_inside(effect)
@@ -220,7 +230,9 @@ class AugmentedStructure(ModelStructure):
                 self._add(f"{effect}:presliding", width, (0.05 * width, 20.0 * width))
         elif effect == "contact_loss" and (unilateral := _unilateral(nominal)) is not None:
             self.mode, self.base = "inside", unilateral
-        elif effect in INSIDE + ("offset",) and _has_inside_form(nominal, effect):
+        elif (effect in INSIDE + ("offset",) or effect == "extra_mode" and
+              self.setting.get("attached")) and _has_inside_form(nominal, effect):
+            # an extra mode inside only where the setting names the mass carrying it
             self.mode = "inside"
             self.base = _with_effect(nominal, effect, self.setting)
         else:
@@ -377,11 +389,14 @@ class AugmentedStructure(ModelStructure):
         """Continuous ``(A, B, C, D)`` from `data`'s inputs to its outputs, for a sensor mass
         whose acceleration the wrapped structure gives exactly (:meth:`_exact_acceleration`):
         the force's rows less the mass times the acceleration's; for an actuator lag on an input
-        of a wrapped structure that gives its own (:meth:`_lagged_system`). Raises
+        of a wrapped structure that gives its own (:meth:`_lagged_system`), and for an extra
+        mass inside a linear oscillator (its own). Raises
         NotImplementedError for any other effect (a global refit then starts from the defaults
         and perturbations only)."""
         if self.effect == "actuator_lag" and self.mode == "wrapper":
             return self._lagged_system(parameters, data)
+        if self.effect == "extra_mode" and self.mode == "inside":
+            return self.base.linear_system(parameters, data)
         exact = self._exact_acceleration(data)
         if exact is None or not callable(getattr(exact, "linear_system", None)):
             raise NotImplementedError(f"{self.name}: no linear system for this effect")

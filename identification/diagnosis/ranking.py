@@ -12,7 +12,8 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from panto.identification.diagnosis.augmentations import INPUT_SIDE, equivalent_input, simulating
+from panto.identification.diagnosis.augmentations import (INPUT_SIDE, equivalent_input,
+                                                          mode_carrier, simulating)
 from panto.identification.estimation.base import IdentificationData, IdentificationError, ModelStructure
 from panto.identification.diagnosis.support import residuals, sensitivities
 from panto.identification.structures.oscillators import (OUTPUT_NAMES, OscillatorStructure,
@@ -230,6 +231,10 @@ def _candidate(context: _Context, ranked: _OutputRanking, key: str, score: Any) 
                 "variant": other, "setting": _setting(there, ranked.output, coefficient,
                                                       context.signals, context.train,
                                                       context.roles, context.drive)}
+    carrier = mode_carrier(context.model.structure) if score.effect == "extra_mode" else None
+    if carrier is not None:  # the mode as a mass hung on the head, refitted beside the outside one
+        candidate["other_placement"] = {"variant": f"extra mass on mass {carrier}",
+                                        "setting": {**setting, "attached": carrier}}
     return candidate
 
 

@@ -188,8 +188,10 @@ def _try_one(model: Model, candidate: Mapping[str, Any], current: np.ndarray,
 
 def _where(candidate: Mapping[str, Any]) -> str | None:
     """Where a candidate acts, for the progress lines: the input of an input-side effect, the
-    signal a sensor mass moves with."""
+    signal a sensor mass moves with, the mass an extra one hangs on (``mass2``)."""
     setting = candidate.get("setting", {})
+    if candidate["effect"] == "extra_mode":
+        return f"mass{setting['attached']}" if setting.get("attached") else None
     return setting.get("input") if candidate["effect"] in INPUT_SIDE else \
         setting.get("signal") if candidate["effect"] == "sensor_inertia" else None
 
@@ -387,7 +389,7 @@ def _second_start(candidate: Mapping[str, Any], structure: AugmentedStructure, m
 #: at 96.15 % and took 2-3 times as long); a bellow lag the nominal had bent into an extra mode's
 #: shape needs the global method (seen held-out three-mass/actuator_lag/2120: 0.096 s, named
 #: ``extra_mode`` then ``sensor_inertia`` without it).
-GLOBAL_AFTER_DEFAULTS = ("actuator_lag",)
+GLOBAL_AFTER_DEFAULTS = ("actuator_lag", "extra_mode")
 
 
 def _kept(candidate: Mapping[str, Any], structure: AugmentedStructure, model: Model,

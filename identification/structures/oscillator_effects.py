@@ -51,6 +51,7 @@ import numpy as np
 
 from panto.identification.estimation.base import IdentificationData, IdentificationError
 from panto.identification.structures import friction_kernel, oscillators
+from panto.identification.structures.oscillator_mode import OscillatorWithMode
 from panto.identification.structures.oscillators import (DEFAULT_OUTPUTS, OUTPUT_NAMES,
                                                          OscillatorStructure, coulomb_flow,
                                                          discretise)
@@ -295,6 +296,8 @@ def oscillator_with_effect(structure: OscillatorStructure, effect: str,
     Raises IdentificationError for an effect without an inside form here (the diagnosis then
     adds it from outside).
     """
+    if effect == "extra_mode":
+        return _with_mode(structure, setting)
     if effect not in OSCILLATOR_EFFECTS:
         raise IdentificationError(f"{structure.name}: no inside form for effect {effect!r}")
     friction = bool(structure.friction) or effect == "coulomb_friction"
@@ -306,6 +309,19 @@ def oscillator_with_effect(structure: OscillatorStructure, effect: str,
                                outputs=structure.output_names, hold=structure.hold,
                                v_eps=float(getattr(structure, "v_eps", FRICTION_VELOCITY)),
                                centres=centres)
+
+
+def _with_mode(structure: OscillatorStructure, setting: Mapping[str, Any]) -> OscillatorWithMode:
+    """A linear oscillator with an extra mass on mass ``setting["attached"]`` (default the head),
+    its start frequency and damping the setting's (``frequency_hz``, ``damping``); raises
+    IdentificationError for an oscillator with friction or nonlinear springs."""
+    if type(structure) is not OscillatorStructure or structure.friction:
+        raise IdentificationError(f"{structure.name}: an extra mass inside goes only on a linear "
+                                  "oscillator")
+    return OscillatorWithMode(structure.masses, attached=setting.get("attached"),
+                              frequency=float(setting.get("frequency_hz", 10.0)),
+                              damping=float(setting.get("damping", 0.05)),
+                              outputs=structure.output_names, hold=structure.hold)
 
 
 def _deflections(z: np.ndarray) -> np.ndarray:

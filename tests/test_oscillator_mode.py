@@ -1,0 +1,89 @@
+"""An extra mass hung on an oscillator's head (identification/structures/oscillator_mode.py), the
+diagnosis' ``extra_mode`` inside the dynamics, refitted beside the additive mode
+(ranking.py ``_candidate``'s ``other_placement``)."""
+from __future__ import annotations
+
+import numpy as np
+
+from fixtures.excitations import load_benchmark
+
+from panto.identification.diagnosis.pipeline import DiagnosisOptions, diagnose
+from panto.identification.estimation.base import IdentificationData
+from panto.identification.structures.oscillator_mode import OscillatorWithMode
+from panto.identification.structures.oscillators import OscillatorStructure
+
+MODE = {"m_e": 0.8, "f_e": 7.0, "zeta_e": 0.04}
+
+
+def _data(n: int = 10) -> IdentificationData:
+    t = np.arange(n) * 0.01
+    return IdentificationData(t, np.column_stack([np.full(n, 2.05), np.full(n, 4.0)]),
+                              np.zeros((n, 1)), ("eta", "p"), ("F_c",))
+
+
+def test_the_contact_force_response_is_the_head_with_its_dynamic_mass():
+    """Two paths to ``F_c / eta``: the structure's state space, and the two-mass chain solved by
+    hand at each frequency with the head's mass replaced by its dynamic mass, ``m_2 + m_e
+    (k_e + c_e s) / (m_e s^2 + c_e s + k_e)`` (what a mass on a spring and damper pushes back
+    with); they agree, and differ from the plain oscillator's near the mode."""
+    structure = OscillatorWithMode(2, outputs=("F_c",))
+    v = {**structure.nominal(), **MODE}
+    a, b, c, d = structure.linear_system(v, _data())
+    omega_e = 2 * np.pi * MODE["f_e"]
+    k_e, c_e = MODE["m_e"] * omega_e ** 2, 2 * MODE["zeta_e"] * MODE["m_e"] * omega_e
+    worst, mode_effect = 0.0, 0.0
+    plain = OscillatorStructure(2, outputs=("F_c",))
+    pa, pb, pc, pd = plain.linear_system({k: v[k] for k in plain.parameter_names}, _data())
+    for frequency in np.geomspace(0.5, 40.0, 60):
+        s = 2j * np.pi * frequency
+        state_space = (c @ np.linalg.solve(s * np.eye(len(a)) - a, b) + d)[0, 0]
+        dynamic_mass = v["m2"] + MODE["m_e"] * (k_e + c_e * s) / (MODE["m_e"] * s ** 2
+                                                                   + c_e * s + k_e)
+        stiffness = np.array([[v["k1"] + v["k2"], -v["k2"]], [-v["k2"], v["k2"] + v["k_E"]]])
+        damping = np.array([[v["c1"] + v["c2"], -v["c2"]], [-v["c2"], v["c2"]]])
+        mass = np.diag([v["m1"], dynamic_mass])
+        heights = np.linalg.solve(s ** 2 * mass + s * damping + stiffness, [0.0, v["k_E"]])
+        by_hand = v["k_E"] * (heights[1] - 1.0)
+        worst = max(worst, abs(state_space - by_hand) / abs(by_hand))
+        without = (pc @ np.linalg.solve(s * np.eye(len(pa)) - pa, pb) + pd)[0, 0]
+        mode_effect = max(mode_effect, abs(without - by_hand) / abs(by_hand))
+    assert worst < 1e-9, worst
+    assert mode_effect > 0.5, mode_effect
+
+
+def test_at_rest_the_extra_mass_changes_no_output():
+    """The static state: the extra mass rests where its carrier is, and every output equals the
+    plain oscillator's (the mode has no static force)."""
+    for masses, attached in ((2, 2), (3, 3), (3, 1)):
+        structure = OscillatorWithMode(masses, attached=attached,
+                                       outputs=("F_c", "y_cb", "xi"))
+        plain = OscillatorStructure(masses, outputs=("F_c", "y_cb", "xi"))
+        values = {**structure.nominal(), **MODE}
+        rest = structure.equilibrium(values, 2.05, 4.0)
+        assert abs(rest[2 * masses] - rest[attached - 1]) < 1e-12 and rest[-1] == 0.0
+        data = _data(50)
+        data = IdentificationData(data.time, data.inputs, np.zeros((50, 3)), data.input_names,
+                                  ("F_c", "y_cb", "xi"))
+        own = {k: values[k] for k in plain.parameter_names}
+        assert np.allclose(structure.simulate(values, data), plain.simulate(own, data),
+                           rtol=1e-12, atol=1e-9)
+
+
+def test_a_strong_mode_on_the_head_is_named_and_closes_the_gap():
+    """The seen held-out case two-mass/extra_mode/2017 (benchmarks/effect_plants.py, a plant
+    written apart from the diagnosis: 0.77 kg at 7.5 Hz on the 7.2 kg head, multisine at
+    50 Hz): the nominal's contact-force fit 16 %, a linear black box's 98 %. The additive mode
+    gained 0.4 points and the verdict was ``unexplained``; the mass on the head reaches the
+    plant's ceiling on both outputs with its mass within 10 %. Only that candidate (a shorter
+    test; the full vocabulary names the same)."""
+    plants, harness = load_benchmark("effect_plants"), load_benchmark("diagnosis_families")
+    case = plants.effect_case(plants.draw_spec("two-mass", "extra_mode", 2017, quick=True))
+    result = diagnose(harness.to_data(case, 0), harness.to_data(case, 1), structure="two-mass",
+                      options=DiagnosisOptions(candidates=("extra_mode",), discovery=False,
+                                               challenge=False, workers=1))
+    assert result.effects == ("extra_mode",), result.summary
+    for output, ceiling in case.ceiling.items():
+        assert result.fit_after[output] > ceiling - 0.2, (result.fit_after, case.ceiling)
+    truth = case.plant.setting["m_e"]
+    assert abs(result.final_parameters["m_e"] - truth) < 0.1 * truth, \
+        (result.final_parameters["m_e"], truth)
