@@ -22,7 +22,7 @@ EXPECTED = {
     "coulomb_friction:F_c": "N", "coulomb_friction:p": "bar", "coulomb_friction:presliding": "m",
     "cubic_stiffness:F_c": "N/m^3", "F_f1": "N", "F_f2": "N", "F_f3": "N",
     "kc1": "1/m^2", "kc2": "1/m^2", "kc3": "1/m^2", "kq1": "1/m", "kq3": "1/m", "T_f": "N m",
-    "k_c3": "N/m^3",
+    "k_c3": "N/m^3", "m_e": "kg", "f_e": "Hz", "zeta_e": "-",
 }
 
 

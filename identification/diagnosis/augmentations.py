@@ -715,6 +715,8 @@ def describe_augmentation(structure: AugmentedStructure) -> str:
              INPUT_SIDE else "output side"}[structure.mode]
     if structure.effect == "sensor_inertia" and structure.setting.get("signal"):
         where += f", the mass moves with {structure.setting['signal']}"
+    if structure.effect == "extra_mode" and structure.mode == "inside":
+        where += f", a mass hung on mass {structure.setting['attached']} (from the bottom)"
     centres = getattr(_innermost(structure.base), "centres", None)
     if structure.effect == "cubic_stiffness" and structure.mode == "inside" and centres:
         where += ", the spring laws centred at deflections " + ", ".join(
@@ -725,4 +727,4 @@ def describe_augmentation(structure: AugmentedStructure) -> str:
 
 __all__ = ["AugmentedStructure", "mode_response", "describe_augmentation", "INPUT_SIDE",
            "OUTPUT_SIDE", "INSIDE", "NATIVE_PARAMETERS", "NATIVE_SWITCHES", "EQUIVALENT_INPUTS",
-           "equivalent_input", "stick_slip_run", "simulating"]
+           "equivalent_input", "stick_slip_run", "simulating", "mode_carrier"]

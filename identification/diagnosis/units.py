@@ -22,6 +22,8 @@ follows from what the parameter does to the signal it names:
 ``T_f``, ``k_c3``              hinge friction torque [N m], cubic contact stiffness [N/m^3]
 ``F_f1..3``, ``kc1..3``        friction force on mass i [N], cubic spring coefficient [1/m^2]
 ``kq1..3``                     quadratic spring coefficient [1/m]
+``m_e``, ``f_e``, ``zeta_e``   a mass hung on an oscillator's head [kg], its frequency with the
+                               head held [Hz], its damping ratio [-]
 =============================  ====================================================================
 
 A unit that cannot be derived (a signal without a unit in the data, an unknown name) is ``?``.
@@ -40,7 +42,8 @@ import re
 from typing import Mapping
 
 #: Units of the effect parameters that the nominal structures carry under their own names.
-NATIVE_UNITS = {"T_f": "N m", "k_c3": "N/m^3", "v_eps": "m/s"}
+NATIVE_UNITS = {"T_f": "N m", "k_c3": "N/m^3", "v_eps": "m/s", "m_e": "kg", "f_e": "Hz",
+                "zeta_e": "-"}
 #: Per-mass parameters of the oscillators' inside effects: name pattern -> unit.
 PER_MASS_UNITS = {r"F_f\d+": "N", r"kc\d+": "1/m^2", r"kq\d+": "1/m"}
 #: Effects whose parameter ``effect:signal`` is added to (or is a level of) that signal.
