@@ -87,3 +87,29 @@ def test_a_strong_mode_on_the_head_is_named_and_closes_the_gap():
     truth = case.plant.setting["m_e"]
     assert abs(result.final_parameters["m_e"] - truth) < 0.1 * truth, \
         (result.final_parameters["m_e"], truth)
+
+
+def test_friction_and_springs_are_ranked_through_the_extra_mass():
+    """Once a mass on the head is accepted, the next round ranks friction on each mass and each
+    spring's stiffening through the model's own dynamics, its extra states included (the force
+    vectors were sized for the bare oscillator: seen on the tuning split, three-mass/
+    hysteresis/56, a crash); a force on the head reaches the contact force through the mode."""
+    from panto.identification.diagnosis.augmentations import AugmentedStructure
+    from panto.identification.diagnosis.effects import SignalRoles
+    from panto.identification.diagnosis.ranking import mass_friction, spring_stiffening
+    from panto.identification.diagnosis.refit import Model
+
+    roles = SignalRoles(position="eta", force="F_c", actuators=("eta", "p"), sensor_position="y_cb",
+                        head_position=None)
+    n = 400
+    t = np.arange(n) * 0.01
+    eta = 2.05 + 0.002 * np.sin(2 * np.pi * 1.3 * t)
+    data = IdentificationData(t, np.column_stack([eta, np.full(n, 4.0)]), np.zeros((n, 2)),
+                              ("eta", "p"), ("F_c", "y_cb"))
+    structure = AugmentedStructure(OscillatorStructure(3, outputs=("F_c", "y_cb")), "extra_mode",
+                                   roles, {"output": "F_c", "attached": 3, "frequency_hz": 7.0})
+    model = Model(structure, {**structure.nominal(), **MODE}, ())
+    for regressors, paths in (mass_friction(model, data), spring_stiffening(model, data)):
+        assert regressors and len(paths) == len(regressors)
+        assert all(p.shape == (n, 2) and np.all(np.isfinite(p)) for p in paths.values())
+        assert any(np.max(np.abs(p[:, 0])) > 0 for p in paths.values())

@@ -252,7 +252,7 @@ def mass_friction(model: Any, train: IdentificationData
     n = run.masses.size
     regressors, paths = {}, {}
     for i in range(n):
-        force = np.zeros((2 * n, 1))
+        force = np.zeros((run.a.shape[0], 1))  # an extra mass's states follow
         force[n + i, 0] = 1.0 / run.masses[i]
         for label, (x, setting) in friction_regressors(run.states[:, n + i]).items():
             key = label.replace("(v", f"(v{i + 1}", 1)
@@ -286,7 +286,7 @@ def spring_stiffening(model: Any, train: IdentificationData
     centres = tuple(float(d) for d in deflections[0])  # the spring laws' fixed centres
     regressors, paths = {}, {}
     for i in range(n):
-        force = np.zeros((2 * n, 1))
+        force = np.zeros((run.a.shape[0], 1))  # an extra mass's states follow
         force[n + i, 0] = -1.0 / run.masses[i]
         if i > 0:
             force[n + i - 1, 0] = 1.0 / run.masses[i - 1]
