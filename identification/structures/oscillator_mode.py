@@ -71,9 +71,10 @@ class OscillatorWithMode(OscillatorStructure):
         return values
 
     def bounds(self) -> dict[str, tuple[float, float]]:
-        """The oscillator's; the extra mass 1 g to 500 kg, 0.01-1000 Hz, damping 0.001-2."""
+        """The oscillator's; the extra mass 0 (no mode: it moves alone, uncoupled) to 500 kg,
+        0.01-1000 Hz, damping 0.001-2."""
         values = super().bounds()
-        values.update(m_e=(1e-3, 500.0), f_e=(0.01, 1e3), zeta_e=(1e-3, 2.0))
+        values.update(m_e=(0.0, 500.0), f_e=(0.01, 1e3), zeta_e=(1e-3, 2.0))
         return values
 
     def units(self) -> dict[str, str]:
@@ -82,6 +83,8 @@ class OscillatorWithMode(OscillatorStructure):
     def values(self, parameters: Mapping[str, float]) -> dict[str, float]:
         values = super().values(parameters)
         bad = {k: values[k] for k in MODE_PARAMETERS if not values[k] > 0}
+        if values["m_e"] == 0.0:  # the neutral value: the mode is there, uncoupled
+            bad.pop("m_e")
         if bad:
             raise IdentificationError(f"{self.name}: invalid parameter values {bad}")
         return values
