@@ -21,34 +21,78 @@ def _data(n: int = 10) -> IdentificationData:
                               np.zeros((n, 1)), ("eta", "p"), ("F_c",))
 
 
-def test_the_contact_force_response_is_the_head_with_its_dynamic_mass():
-    """Two paths to ``F_c / eta``: the structure's state space, and the two-mass chain solved by
-    hand at each frequency with the head's mass replaced by its dynamic mass, ``m_2 + m_e
-    (k_e + c_e s) / (m_e s^2 + c_e s + k_e)`` (what a mass on a spring and damper pushes back
-    with); they agree, and differ from the plain oscillator's near the mode."""
-    structure = OscillatorWithMode(2, outputs=("F_c",))
-    v = {**structure.nominal(), **MODE}
-    a, b, c, d = structure.linear_system(v, _data())
+def _by_hand(v: dict, masses: int, attached: int, s: complex) -> complex:
+    """``F_c / eta`` of the chain (base-1, 1-2, ...) solved at ``s`` with mass `attached`'s mass
+    replaced by its dynamic mass ``m_i + m_e (k_e + c_e s) / (m_e s^2 + c_e s + k_e)`` (what a
+    mass on a spring and a damper pushes back with)."""
     omega_e = 2 * np.pi * MODE["f_e"]
     k_e, c_e = MODE["m_e"] * omega_e ** 2, 2 * MODE["zeta_e"] * MODE["m_e"] * omega_e
-    worst, mode_effect = 0.0, 0.0
-    plain = OscillatorStructure(2, outputs=("F_c",))
-    pa, pb, pc, pd = plain.linear_system({k: v[k] for k in plain.parameter_names}, _data())
-    for frequency in np.geomspace(0.5, 40.0, 60):
-        s = 2j * np.pi * frequency
-        state_space = (c @ np.linalg.solve(s * np.eye(len(a)) - a, b) + d)[0, 0]
-        dynamic_mass = v["m2"] + MODE["m_e"] * (k_e + c_e * s) / (MODE["m_e"] * s ** 2
-                                                                   + c_e * s + k_e)
-        stiffness = np.array([[v["k1"] + v["k2"], -v["k2"]], [-v["k2"], v["k2"] + v["k_E"]]])
-        damping = np.array([[v["c1"] + v["c2"], -v["c2"]], [-v["c2"], v["c2"]]])
-        mass = np.diag([v["m1"], dynamic_mass])
-        heights = np.linalg.solve(s ** 2 * mass + s * damping + stiffness, [0.0, v["k_E"]])
-        by_hand = v["k_E"] * (heights[1] - 1.0)
-        worst = max(worst, abs(state_space - by_hand) / abs(by_hand))
-        without = (pc @ np.linalg.solve(s * np.eye(len(pa)) - pa, pb) + pd)[0, 0]
-        mode_effect = max(mode_effect, abs(without - by_hand) / abs(by_hand))
-    assert worst < 1e-9, worst
-    assert mode_effect > 0.5, mode_effect
+    mass = np.array([v[f"m{i + 1}"] for i in range(masses)], complex)
+    mass[attached - 1] += MODE["m_e"] * (k_e + c_e * s) / (MODE["m_e"] * s ** 2 + c_e * s + k_e)
+    dynamic = np.zeros((masses, masses), complex)
+    for i in range(masses):  # spring and damper i join mass i to mass i-1 (or the base)
+        z = v[f"k{i + 1}"] + s * v[f"c{i + 1}"]
+        dynamic[i, i] += z
+        if i > 0:
+            dynamic[i - 1, i - 1] += z
+            dynamic[i, i - 1] -= z
+            dynamic[i - 1, i] -= z
+    dynamic += np.diag(s ** 2 * mass)
+    dynamic[-1, -1] += v["k_E"]
+    force = np.zeros(masses)
+    force[-1] = v["k_E"]
+    heights = np.linalg.solve(dynamic, force)
+    return v["k_E"] * (heights[-1] - 1.0)
+
+
+def test_the_contact_force_response_is_the_chain_with_a_dynamic_mass():
+    """Two paths to ``F_c / eta``: the structure's state space, and the chain solved by hand at
+    each frequency with the carrier's mass replaced by its dynamic mass; they agree, on the head
+    of two masses and on the frame of three, and differ from the plain oscillator's near the
+    mode."""
+    for masses, attached in ((2, 2), (3, 1)):
+        structure = OscillatorWithMode(masses, attached=attached, outputs=("F_c",))
+        v = {**structure.nominal(), **MODE}
+        a, b, c, d = structure.linear_system(v, _data())
+        plain = OscillatorStructure(masses, outputs=("F_c",))
+        pa, pb, pc, pd = plain.linear_system({k: v[k] for k in plain.parameter_names}, _data())
+        worst, mode_effect = 0.0, 0.0
+        for frequency in np.geomspace(0.5, 40.0, 60):
+            s = 2j * np.pi * frequency
+            state_space = (c @ np.linalg.solve(s * np.eye(len(a)) - a, b) + d)[0, 0]
+            by_hand = _by_hand(v, masses, attached, s)
+            worst = max(worst, abs(state_space - by_hand) / abs(by_hand))
+            without = (pc @ np.linalg.solve(s * np.eye(len(pa)) - pa, pb) + pd)[0, 0]
+            mode_effect = max(mode_effect, abs(without - by_hand) / abs(by_hand))
+        assert worst < 1e-9, (masses, attached, worst)
+        assert mode_effect > 0.05, (masses, attached, mode_effect)
+
+
+def test_units_and_another_effect_keep_the_mass_inside():
+    """The structure's units name the mode's parameters; friction added to a model with the mass
+    inside goes on from outside, keeping ``m_e``, ``f_e``, ``zeta_e`` (rebuilt inside a friction
+    oscillator, which has no such mass, the mode had silently become an additive one); and a
+    mass that cannot go inside is an error, never an additive mode in its place."""
+    import pytest
+
+    from panto.identification.diagnosis.augmentations import AugmentedStructure
+    from panto.identification.diagnosis.effects import SignalRoles
+    from panto.identification.estimation.base import IdentificationError
+    from panto.identification.structures.oscillator_effects import NonlinearOscillator
+
+    units = OscillatorWithMode(3).units()
+    assert (units["m_e"], units["f_e"], units["zeta_e"], units["k2"]) == ("kg", "Hz", "-", "N/m")
+    roles = SignalRoles(position="eta", force="F_c", actuators=("eta", "p"), sensor_position="y_cb",
+                        head_position=None)
+    mode = AugmentedStructure(OscillatorStructure(3, outputs=("F_c", "y_cb")), "extra_mode", roles,
+                              {"output": "F_c", "attached": 3, "frequency_hz": 7.0})
+    assert mode.mode == "inside" and not mode.supports_inside("coulomb_friction")
+    friction = AugmentedStructure(mode, "coulomb_friction", roles, {"output": "F_c"})
+    assert {"m_e", "f_e", "zeta_e"} <= set(friction.parameter_names)
+    assert not any(n.startswith("extra_mode:") for n in friction.parameter_names)
+    with pytest.raises(IdentificationError, match="no extra mass inside"):
+        AugmentedStructure(NonlinearOscillator(3, friction=True, outputs=("F_c",)), "extra_mode",
+                           roles, {"output": "F_c", "attached": 3})
 
 
 def test_at_rest_the_extra_mass_changes_no_output():

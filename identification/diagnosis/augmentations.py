@@ -22,7 +22,10 @@ Output side (added to one output, the *target*)
                        simulated by the structure when the data do not measure it);
     ``extra_mode``     ``y + g (H - 1) w~``, ``H = w_0^2 / (s^2 + 2 zeta w_0 s + w_0^2)`` (Tustin)
                        an unmodelled compliant mode (support resonance) driven by ``w``
-                       (gain ``g``, frequency ``f_0`` [Hz], damping ``zeta``).
+                       (gain ``g``, frequency ``f_0`` [Hz], damping ``zeta``); on a linear
+                       two-/three-mass oscillator also inside, as a mass hung on the head
+                       (``setting["attached"]``;
+                       :mod:`~panto.identification.structures.oscillator_mode`).
 Inside the dynamics
     the nominal's own parameters when it has them: the nonlinear pantograph (``physical``):
     ``coulomb_friction -> T_f`` (hinge friction torque), ``cubic_stiffness -> k_c3`` (head
@@ -235,6 +238,10 @@ class AugmentedStructure(ModelStructure):
             # an extra mode inside only where the setting names the mass carrying it
             self.mode = "inside"
             self.base = _with_effect(nominal, effect, self.setting)
+        elif effect == "extra_mode" and self.setting.get("attached"):
+            # never an additive mode in its place: a model rebuilt with another effect inside
+            # (friction, nonlinear springs) must not silently swap the mass for it
+            raise IdentificationError(f"{self.name}: no extra mass inside {nominal.name}")
         else:
             self._build_wrapper()
         if self.mode == "inside":
@@ -282,8 +289,19 @@ class AugmentedStructure(ModelStructure):
         self.base, self.mode = type(nominal)(**options), "switch"
 
     def supports_inside(self, effect: str) -> bool:
-        """Whether `effect` can still go inside the dynamics of this (augmented) model."""
-        return _has_inside_form(self.nominal_structure, effect) and self.mode != "switch"
+        """Whether `effect` can still go inside the dynamics of this (augmented) model: for one
+        whose own effect is inside, only where the model rebuilt with both keeps it there (an
+        extra mass on the head has no form beside friction or nonlinear springs)."""
+        if self.mode == "switch" or not _has_inside_form(self.nominal_structure, effect):
+            return False
+        if self.mode != "inside":
+            return True
+        try:
+            self.with_effect(effect, {"output": self.output_names[0],
+                                      "drive": (self.input_names or ("",))[0]})
+        except IdentificationError:
+            return False
+        return True
 
     def with_effect(self, effect: str, setting: Mapping[str, Any]) -> ModelStructure:
         """Push an inside effect down to the innermost model that takes it (keeps this one)."""

@@ -290,8 +290,10 @@ class NonlinearOscillator(OscillatorStructure):
 
 
 def oscillator_with_effect(structure: OscillatorStructure, effect: str,
-                           setting: Mapping[str, Any]) -> NonlinearOscillator:
-    """`structure` (a linear, friction or nonlinear oscillator) with `effect` inside its dynamics.
+                           setting: Mapping[str, Any]
+                           ) -> NonlinearOscillator | OscillatorWithMode:
+    """`structure` (a linear, friction or nonlinear oscillator) with `effect` inside its dynamics
+    (``extra_mode``: a linear one only, :func:`_with_mode`).
 
     Raises IdentificationError for an effect without an inside form here (the diagnosis then
     adds it from outside).
@@ -321,6 +323,7 @@ def _with_mode(structure: OscillatorStructure, setting: Mapping[str, Any]) -> Os
     return OscillatorWithMode(structure.masses, attached=setting.get("attached"),
                               frequency=float(setting.get("frequency_hz", 10.0)),
                               damping=float(setting.get("damping", 0.05)),
+                              highest=0.95 * float(setting.get("nyquist", 1e3 / 0.95)),
                               outputs=structure.output_names, hold=structure.hold)
 
 

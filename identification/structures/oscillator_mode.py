@@ -43,13 +43,16 @@ class OscillatorWithMode(OscillatorStructure):
         The mass carrying the extra one, 1 to `masses` (default: the head, the top one).
     frequency, damping : float
         Start values of ``f_e`` [Hz] and ``zeta_e`` [-] (the nominal values of the structure).
+    highest : float
+        Upper bound of ``f_e`` [Hz] (the diagnosis: 0.95 times the data's Nyquist frequency, as
+        the additive mode's; above it the hung mass moves with its carrier, a heavier head).
     outputs, hold
         As :class:`~panto.identification.structures.oscillators.OscillatorStructure`.
     """
 
     def __init__(self, masses: int, *, attached: int | None = None, frequency: float = 10.0,
-                 damping: float = 0.05, outputs: Sequence[str] = DEFAULT_OUTPUTS,
-                 hold: str = "foh") -> None:
+                 damping: float = 0.05, highest: float = 1e3,
+                 outputs: Sequence[str] = DEFAULT_OUTPUTS, hold: str = "foh") -> None:
         super().__init__(masses, friction=False, outputs=outputs, hold=hold)
         self.attached = masses if attached is None else int(attached)
         if not 1 <= self.attached <= masses:
@@ -58,7 +61,9 @@ class OscillatorWithMode(OscillatorStructure):
         if not (frequency > 0 and damping > 0):
             raise IdentificationError(f"extra mode start {frequency} Hz / damping {damping}: "
                                       "both must be positive")
-        self.start_frequency, self.start_damping = float(frequency), float(damping)
+        self.highest = float(highest)
+        self.start_frequency = min(float(frequency), self.highest)
+        self.start_damping = float(damping)
         self.name = f"{self.name}+mode@{self.attached}"
         self.parameter_names = tuple(self.parameter_names) + MODE_PARAMETERS
 
@@ -72,13 +77,14 @@ class OscillatorWithMode(OscillatorStructure):
 
     def bounds(self) -> dict[str, tuple[float, float]]:
         """The oscillator's; the extra mass 0 (no mode: it moves alone, uncoupled) to 500 kg,
-        0.01-1000 Hz, damping 0.001-2."""
+        0.01 Hz to ``highest``, damping 0.001-2."""
         values = super().bounds()
-        values.update(m_e=(0.0, 500.0), f_e=(0.01, 1e3), zeta_e=(1e-3, 2.0))
+        values.update(m_e=(0.0, 500.0), f_e=(0.01, self.highest), zeta_e=(1e-3, 2.0))
         return values
 
     def units(self) -> dict[str, str]:
-        return {**super().units(), "m_e": "kg", "f_e": "Hz", "zeta_e": "-"}
+        plain = OscillatorStructure(self.masses, outputs=self.output_names, hold=self.hold)
+        return {**plain.units(), "m_e": "kg", "f_e": "Hz", "zeta_e": "-"}
 
     def values(self, parameters: Mapping[str, float]) -> dict[str, float]:
         values = super().values(parameters)
