@@ -52,10 +52,10 @@ def test_the_lagged_frequency_response_is_its_free_run_to_second_order():
     for what it drives): the two paths agree to O(h^2), four times the rate a sixteenth of the
     error, and far closer than the lag's own effect; on the pressure, and on the wire height,
     which also reaches the contact force directly (its ``D`` column, now the lag state's)."""
-    for name in ("p", "eta"):
+    for name, bound in (("p", 1e-3), ("eta", 3e-3)):  # measured 2.1e-4 and 1.5e-3
         coarse, effect = _worst_error(100.0, 0.1, name)
         fine, _ = _worst_error(400.0, 0.1, name)
-        assert fine < 3e-3 and effect > 0.2, (name, fine, effect)
+        assert fine < bound and effect > 0.2, (name, fine, effect)
         assert coarse / fine > 10.0, (name, coarse, fine)
 
 

@@ -372,9 +372,8 @@ def _second_start(candidate: Mapping[str, Any], structure: AugmentedStructure, m
     (:func:`global_refit`) where the augmented structure gives its frequency response, else the
     refit from the structure's defaults. An actuator lag or an extra mode, where it gives its
     frequency response, takes the defaults' start first and the global refit only when the better
-    of the two lowers
-    the training cost by more than its parameters' BIC penalty (``dBIC < 0``) yet still trails
-    the adequacy's linear black box (:data:`GLOBAL_AFTER_DEFAULTS`)."""
+    of the two lowers the training cost by more than its parameters' BIC penalty (``dBIC < 0``)
+    yet still trails the adequacy's linear black box (:data:`GLOBAL_AFTER_DEFAULTS`)."""
     train = search.train
     linear = _linear(structure, first[2].parameters, train)
     later = structure.effect in GLOBAL_AFTER_DEFAULTS
@@ -384,8 +383,9 @@ def _second_start(candidate: Mapping[str, Any], structure: AugmentedStructure, m
             structure, model, train, free, search.fit_options, from_defaults=True))
     promising = later and kept[0]["delta_bic"] < 0 and lacks_linear_dynamics(search, kept[3])
     if linear and (not later or promising):
+        start = kept[1]  # the global refit's default start: the better refit so far
         kept = _kept(candidate, structure, model, kept, current, search,
-                     lambda: global_refit(structure, train, free, search, kept[1]))
+                     lambda: global_refit(structure, train, free, search, start))
     return kept
 
 

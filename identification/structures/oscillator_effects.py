@@ -323,7 +323,8 @@ def _with_mode(structure: OscillatorStructure, setting: Mapping[str, Any]) -> Os
     return OscillatorWithMode(structure.masses, attached=setting.get("attached"),
                               frequency=float(setting.get("frequency_hz", 10.0)),
                               damping=float(setting.get("damping", 0.05)),
-                              highest=0.95 * float(setting.get("nyquist", 1e3 / 0.95)),
+                              highest=0.95 * float(setting["nyquist"]) if "nyquist" in setting
+                              else 1e3,
                               outputs=structure.output_names, hold=structure.hold)
 
 

@@ -21,7 +21,7 @@ and simulated as the oscillator is (exact first-order-hold discretisation).
 """
 from __future__ import annotations
 
-from typing import Mapping, Sequence
+from typing import Mapping, NoReturn, Sequence
 
 import numpy as np
 
@@ -88,9 +88,9 @@ class OscillatorWithMode(OscillatorStructure):
 
     def values(self, parameters: Mapping[str, float]) -> dict[str, float]:
         values = super().values(parameters)
-        bad = {k: values[k] for k in MODE_PARAMETERS if not values[k] > 0}
-        if values["m_e"] == 0.0:  # the neutral value: the mode is there, uncoupled
-            bad.pop("m_e")
+        # m_e = 0 is the neutral value: the mode is there, uncoupled
+        bad = {k: values[k] for k in MODE_PARAMETERS
+               if not (values[k] > 0 or k == "m_e" and values[k] == 0.0)}
         if bad:
             raise IdentificationError(f"{self.name}: invalid parameter values {bad}")
         return values
@@ -122,6 +122,6 @@ class OscillatorWithMode(OscillatorStructure):
         return (out, np.vstack([b, np.zeros((2, b.shape[1]))]),
                 np.hstack([c, np.zeros((c.shape[0], 2))]), d)
 
-    def with_effect(self, effect: str, setting: Mapping[str, object]) -> "OscillatorWithMode":
+    def with_effect(self, effect: str, setting: Mapping[str, object]) -> NoReturn:
         """No other effect goes inside this one (the diagnosis adds them from outside)."""
         raise IdentificationError(f"{self.name}: no inside form for effect {effect!r}")
