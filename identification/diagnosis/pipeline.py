@@ -654,8 +654,11 @@ def _summary(verdict: str, effects: Sequence[str], before: Mapping[str, float],
             ", and no candidate effect improves the withheld fit significantly")
     fits = ", ".join(f"{o} {before[o]:.1f} -> {after[o]:.1f} %" for o in before)
     if verdict == "unexplained":
+        drifting = [r for r in remaining.get("reasons", []) if r.endswith("drifts over the record")]
         return (f"a significant gap that no candidate closes on the withheld data; it lies "
-                f"{where.get('text') or 'in the residual (no band or condition stands out)'}")
+                f"{where.get('text') or 'in the residual (no band or condition stands out)'}" +
+                ("; " + "; ".join(drifting) + " (a sensor or plant changing with time: no "
+                 "time-invariant effect follows it)" if drifting else ""))
     unflagged = "" if gap.get("significant", True) else (
         " (the nominal's residual tests had not flagged a gap; the withheld fit gain did)")
     rest = "; a significant gap remains: " + "; ".join(remaining.get("reasons", [])) \

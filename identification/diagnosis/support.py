@@ -33,6 +33,7 @@ Formulas (the diagnosis reference, ``identification_and_diagnosis.md``):
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from typing import Any, Mapping, Sequence
 
@@ -657,40 +658,87 @@ sensor's the cost stays below 0.7 points (:func:`systematic_cost`): 10 is fourte
 Not taken from the benchmark families' labels."""
 
 
-def drift_test(residual: np.ndarray, simulated: np.ndarray, *, blocks: int = 8,
-               alpha: float = 0.01) -> list[str]:
-    """Whether the residual's offset or its gain on the prediction drifts over the record.
-
-    A sensor whose gain or zero drifts, a bed that warms up: the residual ``eps`` is then
-    ``a(t) + b(t) y_hat`` with slowly changing ``a``, ``b``, zero-mean over the record and
-    uncorrelated with the inputs on average, so neither the cross-correlation nor the
-    nonlinearity tests see it. The record is cut into `blocks` blocks; in each, ``eps`` is
-    regressed on ``[1, y_hat - mean(y_hat)]``; the block estimates of ``a`` and ``b`` are regressed
-    on the block's centre time, and the slope's t statistic (``blocks - 2`` degrees of freedom,
-    the scatter of the block estimates about their line as the error, so a coloured residual
-    widens it by itself while blocks are longer than its correlation time) is compared with the
-    ``alpha`` quantile, Bonferroni over the two. Returns the names of the drifting terms."""
-    eps, y_hat = np.asarray(residual, float), np.asarray(simulated, float)
-    ok = np.isfinite(eps) & np.isfinite(y_hat)
+def _block_estimates(eps: np.ndarray, y_hat: np.ndarray, ok: np.ndarray,
+                     blocks: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per block of the record (`blocks` of them, those with more than 3 valid samples): the
+    centre sample and the least-squares ``[a, b]`` of ``eps = a + b (y_hat - mean(y_hat))``."""
     parts = [p for p in np.array_split(np.flatnonzero(ok), blocks) if len(p) > 3]
-    if len(parts) < 4:
-        return []
     centre, estimates = [], []
     for index in parts:
         x = y_hat[index] - np.mean(y_hat[ok])
         basis = np.column_stack([np.ones(len(index)), x])
         estimates.append(np.linalg.lstsq(basis, eps[index], rcond=None)[0])
         centre.append(float(np.mean(index)))
-    t = np.asarray(centre) - np.mean(centre)
-    estimates = np.asarray(estimates)
+    return np.asarray(centre), np.asarray(estimates).reshape(len(parts), 2)
+
+
+#: Random orders of the block estimates the serial test (:func:`drift_test`) compares with.
+PERMUTATIONS = 4000
+
+
+@functools.lru_cache(maxsize=8)
+def _orders(n: int) -> np.ndarray:
+    """:data:`PERMUTATIONS` seeded random orders of ``n`` items (rows)."""
+    return np.argsort(np.random.default_rng(0).random((PERMUTATIONS, n)), axis=1)
+
+
+def _serial_p(values: np.ndarray) -> float:
+    """One-sided permutation p-value of the von Neumann ratio of `values` (the mean squared
+    successive difference over the variance: about 2 for exchangeable values, small where they
+    follow a slow curve of any shape), against :data:`PERMUTATIONS` random orders of the same
+    values (seeded: the same answer every run)."""
+    def ratio(x: np.ndarray) -> np.ndarray:
+        d = np.diff(x, axis=-1)
+        c = x - x.mean(axis=-1, keepdims=True)
+        return np.sum(d * d, axis=-1) / np.maximum(np.sum(c * c, axis=-1), 1e-300)
+
+    order = _orders(len(values))
+    below = int(np.sum(ratio(values[order]) <= ratio(values)))
+    return (1 + below) / (PERMUTATIONS + 1)
+
+
+def drift_test(residual: np.ndarray, simulated: np.ndarray, *, blocks: int = 8,
+               serial_blocks: int = 16, alpha: float = 0.01) -> list[str]:
+    """Whether the residual's offset or its gain on the prediction drifts over the record.
+
+    A sensor whose gain or zero drifts, a bed that warms up: the residual ``eps`` is then
+    ``a(t) + b(t) y_hat`` with slowly changing ``a``, ``b``, zero-mean over the record and
+    uncorrelated with the inputs on average, so neither the cross-correlation nor the
+    nonlinearity tests see it. Two tests on block estimates of ``a`` and ``b`` (``eps`` regressed
+    on ``[1, y_hat - mean(y_hat)]`` in each block), each at ``alpha`` with Bonferroni over the two
+    terms (the two tests together: at most ``2 alpha`` false alarms per output on a stationary
+    residual; measured in tests/test_drift_test.py):
+
+    - a trend: the `blocks` estimates regressed on the block's centre time, the slope's t
+      statistic (``blocks - 2`` degrees of freedom, the scatter of the block estimates about their
+      line as the error, so a coloured residual widens it by itself while blocks are longer than
+      its correlation time) against its ``alpha / 4`` two-sided quantile (``alpha / 2`` per term);
+    - any slow variation: the von Neumann ratio of the `serial_blocks` estimates against random
+      orders of the same values (:func:`_serial_p`, one-sided at ``alpha / 2`` per term). A gain that
+      swings through a period within the record has no trend; its neighbouring blocks still
+      agree more than random pairs do (seen held-out three-mass/time_varying_gain/2459, a 10 %
+      sensor gain swinging with a 14 s period in 20 s: the trend test did not fire, the verdict
+      was ``none`` with the plant 6 points above the nominal). Exchangeable estimates need blocks
+      longer than the residual's correlation time, as the trend test's error does.
+
+    Returns the names of the drifting terms."""
+    eps, y_hat = np.asarray(residual, float), np.asarray(simulated, float)
+    ok = np.isfinite(eps) & np.isfinite(y_hat)
+    centre, estimates = _block_estimates(eps, y_hat, ok, blocks)
+    if len(centre) < 4:
+        return []
+    t = centre - np.mean(centre)
+    _, serial = _block_estimates(eps, y_hat, ok, serial_blocks)
     found = []
-    quantile = float(stats.t.isf(alpha / 4, len(parts) - 2))
+    quantile = float(stats.t.isf(alpha / 4, len(centre) - 2))
     for k, name in enumerate(("offset", "gain")):
         e = estimates[:, k]
         slope = float(t @ (e - e.mean()) / (t @ t))
         scatter = e - e.mean() - slope * t
-        error = math.sqrt(float(scatter @ scatter) / (len(parts) - 2) / float(t @ t))
-        if error > 0 and abs(slope) / error > quantile:
+        error = math.sqrt(float(scatter @ scatter) / (len(centre) - 2) / float(t @ t))
+        trend = error > 0 and abs(slope) / error > quantile
+        swing = len(serial) >= 8 and _serial_p(serial[:, k]) < alpha / 2
+        if trend or swing:
             found.append(name)
     return found
 
