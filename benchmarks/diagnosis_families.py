@@ -293,6 +293,8 @@ def summarise(records: list[dict]) -> dict:
         "out_of_library_unexplained_strong": _share([r for r in outside if r["strong"]]),
         "out_of_library_unexplained_weak": _share([r for r in outside if not r["strong"]]),
         "out_of_library_unexplained_all": _share(outside),
+        "out_of_library_unexplained_unabsorbable": _share([r for r in outside
+                                                           if r.get("unabsorbable")]),
         "gap_closed_median_named_strong": median_gap([r for r in named if r["strong"]]),
         "gap_closed_median_named_all": median_gap(named),
         "gap_closed_median_named_strong_reproducible": median_gap(
@@ -365,6 +367,9 @@ def markdown(report: dict) -> str:
              f"{STRONG:g} points) | | | {_cell(s['library_top1_unabsorbable'])} |",
              f"| top-1 name, strong library effects a refitted nominal absorbs (*unabsorbed* < "
              f"{STRONG:g}) | | | {_cell(s['library_top1_absorbable'])} |",
+             f"| `unexplained`, out-of-library effects no refitted nominal absorbs "
+             f"(*unabsorbed* >= {STRONG:g} points) | | | "
+             f"{_cell(s.get('out_of_library_unexplained_unabsorbable', _share([])))} |",
              f"| median gap closed where named right | "
              f"{_percent(s['gap_closed_median_named_strong'])} | | "
              f"{_percent(s['gap_closed_median_named_all'])} |",

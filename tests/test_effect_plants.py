@@ -214,6 +214,22 @@ def test_scores_follow_the_labels(harness):
     assert right["correct"] and right["gap_closed_main"] == 0.9 and right["strong"]
 
 
+def test_out_of_library_scores_are_also_given_over_the_unabsorbable_cases(harness):
+    """A creep a refitted nominal absorbs (unabsorbed 0) answered ``none`` counts against the
+    strong out-of-library score but not against the unabsorbable one, as for library effects."""
+    def case(label, verdict, unabsorbed):
+        return harness.score({"strongest": 5.0, "gap_closed": {"F_c": 0.0},
+                              "detectability": {"F_c": 5.0}, "label": label, "verdict": verdict,
+                              "effects": [], "unabsorbed": {"F_c": unabsorbed}})
+
+    summary = harness.summarise([case("creep", "none", 0.0),
+                                 case("hysteresis", "unexplained", 6.0)])
+    assert summary["out_of_library_unexplained_strong"]["right"] == 1
+    assert summary["out_of_library_unexplained_strong"]["cases"] == 2
+    assert (summary["out_of_library_unexplained_unabsorbable"]["right"],
+            summary["out_of_library_unexplained_unabsorbable"]["cases"]) == (1, 1)
+
+
 def test_the_reproducible_gap_median_leaves_out_only_the_unreproducible_runs(harness):
     def case(gap, reproducible):
         return harness.score({"strongest": 5.0, "gap_closed": {"F_c": gap},
