@@ -104,6 +104,28 @@ def test_a_heavy_sensor_mass_is_named_with_its_mass():
     assert result.fit_after["F_c"] > case.ceiling["F_c"] - 0.1, (result.summary, case.ceiling)
 
 
+def test_a_sensor_mass_gets_its_global_refit_where_the_black_box_does_not_validate():
+    """The seen held-out case three-mass/sensor_inertia/411 (3.3 kg above the head, contact force
+    only, a multisine at 50 Hz whose validation run sits elsewhere): the adequacy's black box
+    fits the training run 2.9 points above the nominal (F test p ~ 1e-253: the structure cannot
+    express it) but validates at 60.6 % against the nominal's 72.6 %, so the validation-side
+    test of missing linear dynamics gave the sensor mass no global refit and its local refits
+    found nothing (``unexplained``; with the full vocabulary an extra mode at 20 Hz was named).
+    The training-side test gives it (refit.py ``lacks_linear_dynamics``): named, its mass within
+    5 %, the withheld fit within 0.2 points of the plant's own. The sensor mass alone (a shorter
+    test)."""
+    plants, harness = load_benchmark("effect_plants"), load_benchmark("diagnosis_families")
+    case = plants.effect_case(plants.draw_spec("three-mass", "sensor_inertia", 411, quick=True))
+    result = diagnose(harness.to_data(case, 0), harness.to_data(case, 1), structure="three-mass",
+                      options=DiagnosisOptions(candidates=("sensor_inertia",),
+                                               discovery=False, challenge=False, workers=1))
+    assert result.effects[:1] == ("sensor_inertia",), result.summary
+    truth = case.plant.setting["m_s"]
+    assert abs(-result.final_parameters["sensor_inertia:F_c"] - truth) < 0.05 * truth, \
+        (result.final_parameters["sensor_inertia:F_c"], truth)
+    assert result.fit_after["F_c"] > case.ceiling["F_c"] - 0.2, (result.summary, case.ceiling)
+
+
 def test_a_sensor_mass_is_refitted_in_the_head_as_well_as_on_the_wire():
     """The seen held-out case two-mass/sensor_inertia/2106 (1.04 kg above the head, contact
     force and cross-bar height measured, the head not; a chirp at 50 Hz): the ranking's best

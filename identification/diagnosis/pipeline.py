@@ -29,7 +29,8 @@ causes it, and how far the gap shrinks once that effect is in the model.
    projected out; refit the top ``max_refits`` significant ones as
    :class:`~panto.identification.diagnosis.augmentations.AugmentedStructure` (the nominal's parameters free too).
    While the adequacy's linear black box validates more than ``LINEAR_SHORTFALL`` (2) points
-   better than the current model, every candidate adding dynamics (lag, delay, sensor mass,
+   better than the current model (or fits the training run better by as much where its F test
+   found that the structure cannot express the data), every candidate adding dynamics (lag, delay, sensor mass,
    extra mode) is refitted as well, on every input it can enter, whatever its rank, and such a
    refit gets a second start (:func:`~panto.identification.diagnosis.refit.lacks_linear_dynamics`):
    from the structure's defaults, or by the nominal's own global method where the augmented
@@ -368,10 +369,12 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
     before, analysis_before, gap, fit_before = _where(model, validation, roles, say)
     nominal_model = model
     linear_level = black_box_validation(adequacy, validation)
+    linear_training = dict(adequacy.black_box_fit) \
+        if adequacy is not None and adequacy.verdict == "cannot express" else None
     with trial_pool(resolve_workers(options.workers), executor) as pool:
         model, current, rounds, steps, accepted, left = _search(
             model, before, candidates, Search(train, validation, roles, options, fit_options, say,
-                                              linear_level), pool)
+                                              linear_level, linear_training), pool)
         remaining_gap = left if left is not None else (
             _gap(model, validation, current, roles) if steps else gap)
         fit_after = fit_per_output(validation, current)
@@ -474,12 +477,14 @@ def _search(model: Model, before: np.ndarray, candidates: Sequence[str], search:
                 break
         remaining = [c for c in candidates if c not in accepted]
         every = [c for c in ADDS_DYNAMICS if c in remaining] \
-            if lacks_linear_dynamics(search, current) else []
+            if lacks_linear_dynamics(search, current, model) else []
         ranking = rank_candidates(model, train, roles, remaining, options.max_refits, every)
         if ranking.get("appended"):
-            say(f"diagnose: round {round_index + 1}: the linear black box validates more than "
-                f"{LINEAR_SHORTFALL:g} points better: every candidate adding dynamics is refitted "
-                f"on every input it can enter ({ranking['appended']} beyond the ranked ones)")
+            say(f"diagnose: round {round_index + 1}: the linear black box fits more than "
+                f"{LINEAR_SHORTFALL:g} points better (on the validation run, or on the training "
+                "run where the structure cannot express its linear dynamics): every candidate "
+                f"adding dynamics is refitted on every input it can enter "
+                f"({ranking['appended']} beyond the ranked ones)")
         if ranking.get("rivals"):
             say(f"diagnose: round {round_index + 1}: " + ", ".join(
                 f"{r} refitted beside {', '.join(k for k, v in RIVALS.items() if r in v)} "
