@@ -91,3 +91,32 @@ def test_the_ranked_head_is_the_same_when_extra_effects_fall_below_the_floor(mon
     every = rank_candidates(model, _run(1), roles, candidates, 2, every=("actuator_lag",))["top"]
     assert [c["variant"] for c in plain] == ["extra_mode", "input_delay@eta"]
     assert [c["variant"] for c in every] == ["extra_mode", "input_delay@eta", "actuator_lag@p"]
+
+
+def test_missing_linear_dynamics_is_read_on_the_training_run_where_the_black_box_fails_to_validate():
+    """refit.py ``lacks_linear_dynamics``: the validation side (the black box validates more than
+    2 points above the current model's free run) or, where the adequacy's F test found that the
+    structure cannot express the data (``Search.linear_training`` set), the training side (the
+    black box fits the training run more than 2 points above the current model)."""
+    from panto.identification.diagnosis.refit import Search, lacks_linear_dynamics
+
+    t = np.arange(200) * 0.02
+    y = np.sin(2 * np.pi * 0.7 * t)
+    data = IdentificationData(t, np.column_stack([np.zeros_like(t)]), y[:, None], ("eta",),
+                              ("F_c",))
+    current = 0.9 * y[:, None]  # validates at 90 %
+    roles = SignalRoles(position="eta", force="F_c", actuators=("eta",), sensor_position=None,
+                        head_position=None)
+
+    def search(level, training):
+        return Search(data, data, roles, DiagnosisOptions(), {}, lambda _: None, level, training)
+
+    def model(fit):
+        return Model(OscillatorStructure(2, outputs=("F_c",)), {}, (), fit_train={"F_c": fit})
+
+    assert lacks_linear_dynamics(search({"F_c": 93.0}, None), current, model(99.0))
+    assert not lacks_linear_dynamics(search({"F_c": 91.0}, None), current, model(90.0))
+    assert lacks_linear_dynamics(search({"F_c": 60.0}, {"F_c": 97.0}), current, model(94.0))
+    assert not lacks_linear_dynamics(search({"F_c": 60.0}, {"F_c": 97.0}), current, model(95.5))
+    assert lacks_linear_dynamics(search(None, {"F_c": 97.0}), current, model(94.0))
+    assert not lacks_linear_dynamics(search(None, None), current, model(50.0))

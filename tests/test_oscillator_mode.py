@@ -174,3 +174,34 @@ def test_friction_and_springs_are_ranked_through_the_extra_mass():
         assert regressors and len(paths) == len(regressors)
         assert all(p.shape == (n, 2) and np.all(np.isfinite(p)) for p in paths.values())
         assert any(np.max(np.abs(p[:, 0])) > 0 for p in paths.values())
+
+
+def test_the_mode_grid_leaves_other_effects_and_the_additive_mode_alone():
+    """refit.py ``located_mode`` changes only an extra mass inside an oscillator: an additive
+    mode's or a lag's start comes back as it went in, and a mass inside starts at a grid point
+    no costlier than its start."""
+    from panto.identification.diagnosis.augmentations import AugmentedStructure
+    from panto.identification.diagnosis.effects import SignalRoles
+    from panto.identification.diagnosis.refit import located_mode
+
+    roles = SignalRoles(position="eta", force="F_c", actuators=("eta", "p"), sensor_position=None,
+                        head_position=None)
+    n = 400
+    t = np.arange(n) * 0.02
+    eta = 2.05 + 0.002 * np.sin(2 * np.pi * 1.3 * t) + 0.001 * np.sin(2 * np.pi * 6.1 * t)
+    inputs = np.column_stack([eta, np.full(n, 4.0)])
+    truth = OscillatorWithMode(2, outputs=("F_c",))
+    data = IdentificationData(t, inputs, np.zeros((n, 1)), ("eta", "p"), ("F_c",))
+    measured = truth.simulate({**truth.nominal(), "m_e": 1.5, "f_e": 5.0, "zeta_e": 0.05}, data)
+    data = IdentificationData(t, inputs, measured, ("eta", "p"), ("F_c",))
+    plain = OscillatorStructure(2, outputs=("F_c",))
+    for effect, setting in (("extra_mode", {"output": "F_c", "frequency_hz": 20.0}),
+                            ("actuator_lag", {"input": "eta"})):
+        other = AugmentedStructure(plain, effect, roles, setting)
+        start = other.nominal()
+        assert located_mode(other, start, data) == start
+    inside = AugmentedStructure(plain, "extra_mode", roles,
+                                {"output": "F_c", "attached": 2, "frequency_hz": 20.0})
+    start = inside.nominal()
+    located = located_mode(inside, start, data)
+    assert located != start and abs(located["f_e"] - 5.0) < 1.5, located

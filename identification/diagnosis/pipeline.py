@@ -592,7 +592,8 @@ def _gap(model: Model, data: IdentificationData, simulated: np.ndarray,
     retuned = replace(part, outputs=part.outputs - (tuning["prediction"][k:] - y))
     costs = {o: systematic_cost(part.inputs, part.outputs[:, j], y[:, j])
              for j, o in enumerate(part.output_names)}
-    drift = {o: drift_test(retuned.outputs[:, j] - y[:, j], y[:, j])
+    drift = {o: drift_test(retuned.outputs[:, j] - y[:, j], y[:, j],
+                           alpha=0.01 / len(part.output_names))
              for j, o in enumerate(part.output_names)}
     gap = gap_significance(_analyse(retuned, y, model, roles), part, tuning=tuning, costs=costs,
                            drift=drift)
@@ -659,11 +660,12 @@ def _summary(verdict: str, effects: Sequence[str], before: Mapping[str, float],
             ", and no candidate effect improves the withheld fit significantly")
     fits = ", ".join(f"{o} {before[o]:.1f} -> {after[o]:.1f} %" for o in before)
     if verdict == "unexplained":
-        drifting = [r for r in remaining.get("reasons", []) if r.endswith("drifts over the record")]
+        drifting = [f"{o} residual {' and '.join(terms)} drift over the record"
+                    for o, terms in (remaining.get("drift") or {}).items() if terms]
         return (f"a significant gap that no candidate closes on the withheld data; it lies "
                 f"{where.get('text') or 'in the residual (no band or condition stands out)'}" +
-                ("; " + "; ".join(drifting) + " (a sensor or plant changing with time: no "
-                 "time-invariant effect follows it)" if drifting else ""))
+                ("; " + "; ".join(drifting) + " (consistent with a sensor or plant changing with "
+                 "time, or with a misfit that the excitation sweeps through)" if drifting else ""))
     unflagged = "" if gap.get("significant", True) else (
         " (the nominal's residual tests had not flagged a gap; the withheld fit gain did)")
     rest = "; a significant gap remains: " + "; ".join(remaining.get("reasons", [])) \

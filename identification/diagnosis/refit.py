@@ -39,9 +39,11 @@ from panto.identification.estimation.least_squares import fit_least_squares
 
 #: Linear effects that add dynamics (a state, a delay, a mode, a mass in the sensor path).
 ADDS_DYNAMICS = ("actuator_lag", "input_delay", "sensor_inertia", "extra_mode")
-#: Validation fit points by which the adequacy's linear black box must beat the current model on
-#: some output before a rejected :data:`ADDS_DYNAMICS` refit gets a second start (the 2-point
-#: relevance of a strong effect in the independent families).
+#: Fit points by which the adequacy's linear black box must beat the current model on some
+#: output, on the validation run (or on the training run where its F test found the structure
+#: cannot express the data: :func:`lacks_linear_dynamics`), before an :data:`ADDS_DYNAMICS`
+#: refit gets a second start (the 2-point relevance of a strong effect in the independent
+#: families).
 LINEAR_SHORTFALL = 2.0
 
 
@@ -276,8 +278,7 @@ def _finite_run(model: Model, validation: IdentificationData,
     return simulated
 
 
-def _second_start_due(effect: str, search: Search, current: np.ndarray,
-                      model: Model | None = None) -> bool:
+def _second_start_due(effect: str, search: Search, current: np.ndarray, model: Model) -> bool:
     """Whether a refit of `effect` gets a second start from the structure's defaults (one
     rejected or passing only on other evidence; a linear one that adds dynamics even when it
     passes): an effect inside the dynamics always; a linear one that adds dynamics
@@ -290,8 +291,7 @@ def _second_start_due(effect: str, search: Search, current: np.ndarray,
     return effect in ADDS_DYNAMICS and lacks_linear_dynamics(search, current, model)
 
 
-def lacks_linear_dynamics(search: Search, current: np.ndarray,
-                          model: Model | None = None) -> bool:
+def lacks_linear_dynamics(search: Search, current: np.ndarray, model: Model) -> bool:
     """Whether linear dynamics the data hold are not expressed yet (False without a black box):
     the adequacy's linear black box validates better than the current model (`current`: its free
     run on the validation run) by :data:`LINEAR_SHORTFALL` points on some output, or, where the
@@ -302,13 +302,12 @@ def lacks_linear_dynamics(search: Search, current: np.ndarray,
     sensor_inertia/411, a 3.3 kg sensor mass on the head; the black box of order 8 fitted the
     training run at 96.8 % against the nominal's 93.9 % and validated at 60.6 % against its
     72.6 %, so no refit of a sensor mass got its second start and an extra mode was named)."""
-    if search.linear_level is None:
-        return False
-    fits = fit_per_output(search.validation, current)
-    if any(level - fits[o] > LINEAR_SHORTFALL for o, level in search.linear_level.items()
-           if o in fits):
-        return True
-    trained = dict(model.fit_train) if model is not None else {}
+    if search.linear_level is not None:
+        fits = fit_per_output(search.validation, current)
+        if any(level - fits[o] > LINEAR_SHORTFALL for o, level in search.linear_level.items()
+               if o in fits):
+            return True
+    trained = dict(model.fit_train)
     return any(level - trained[o] > LINEAR_SHORTFALL
                for o, level in (search.linear_training or {}).items() if o in trained)
 
@@ -593,10 +592,17 @@ def located_lag(structure: AugmentedStructure, start: Mapping[str, float],
     name = structure.effect_parameters[0]
     low, high = structure.bounds()[name]
     grid = [k * train.sample_period for k in LAG_GRID if low <= k * train.sample_period <= high]
+    return _best_on_grid(structure, train, start, ({name: float(v)} for v in grid))
+
+
+def _best_on_grid(structure: AugmentedStructure, train: IdentificationData,
+                  start: Mapping[str, float], changes: Any) -> dict[str, float]:
+    """Of `start` and `start` updated by each of `changes` (mappings of parameter values), the
+    one with the lowest training cost (:func:`_training_cost`); `start` on ties."""
     cost = functools.partial(_training_cost, structure, train)
     best, best_cost = dict(start), cost(start)
-    for value in grid:
-        trial = {**start, name: float(value)}
+    for change in changes:
+        trial = {**start, **change}
         value_cost = cost(trial)
         if value_cost < best_cost:
             best, best_cost = trial, value_cost
@@ -631,15 +637,9 @@ def located_mode(structure: AugmentedStructure, start: Mapping[str, float],
     low = max(low, 4.0 / (len(train) * train.sample_period))
     if not (carrier > 0 and high > low):
         return dict(start)
-    cost = functools.partial(_training_cost, structure, train)
-    best, best_cost = dict(start), cost(start)
-    for share in MODE_MASS_SHARES:
-        for frequency in np.geomspace(low, high, MODE_FREQUENCIES):
-            trial = {**start, "m_e": share * carrier, "f_e": float(frequency)}
-            value_cost = cost(trial)
-            if value_cost < best_cost:
-                best, best_cost = trial, value_cost
-    return best
+    return _best_on_grid(structure, train, start, (
+        {"m_e": share * carrier, "f_e": float(frequency)} for share in MODE_MASS_SHARES
+        for frequency in np.geomspace(low, high, MODE_FREQUENCIES)))
 
 
 def _training_cost(structure: AugmentedStructure, train: IdentificationData,
