@@ -463,6 +463,17 @@ def rescore(path: Path, quiet: bool = False) -> int:
 
 # --- command line -----------------------------------------------------------------------------
 
+def named_spec(name: str, quick: bool) -> effect_plants.CaseSpec:
+    """The case ``family/label/seed`` (a record's ``name``); ValueError naming what is wrong."""
+    parts = name.split("/")
+    if len(parts) != 3 or parts[0] not in FAMILIES or \
+            parts[1] not in effect_plants.LABELS or not parts[2].isdigit():
+        raise ValueError(f"--names {name!r}: expected FAMILY/LABEL/SEED with FAMILY in "
+                         f"{', '.join(FAMILIES)}, LABEL in "
+                         f"{', '.join(effect_plants.LABELS)} and SEED a whole number")
+    return effect_plants.draw_spec(parts[0], parts[1], int(parts[2]), quick=quick)
+
+
 def parse_arguments(argv: list[str] | None) -> argparse.Namespace:
     """The command line (module notes); refuses the held-out split without the guard."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -479,13 +490,22 @@ def parse_arguments(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--options", nargs="*", default=[], metavar="KEY=VALUE",
                         help="DiagnosisOptions fields, e.g. adequacy=true global_fit=true")
     parser.add_argument("--quiet", action="store_true")
+    parser.add_argument("--names", nargs="+", default=None, metavar="FAMILY/LABEL/SEED",
+                        help="run these cases instead of a split's sequence (cases already looked "
+                             "at, e.g. a record's misses re-run with newer code; never a "
+                             "judgement)")
     parser.add_argument("--rescore", default=None, metavar="REPORT.json",
                         help="score a stored report again with this version's scores (no case "
                              "is run; every recorded outcome and fit is kept) and rewrite it")
     arguments = parser.parse_args(argv)
     if arguments.rescore:
         return arguments
-    if arguments.split == "heldout" and not arguments.i_am_not_tuning:
+    if arguments.names:
+        try:
+            arguments.specs = [named_spec(name, arguments.quick) for name in arguments.names]
+        except ValueError as error:
+            parser.error(str(error))
+    if arguments.split == "heldout" and not arguments.i_am_not_tuning and not arguments.names:
         parser.error("--split heldout is the held-out split: it runs only with --i-am-not-tuning "
                      "(tune on --split tune)")
     if arguments.workers < 1 or (arguments.cases is not None and arguments.cases < 1):
@@ -504,15 +524,19 @@ def main(argv: list[str] | None = None) -> int:
     arguments = parse_arguments(argv)
     if arguments.rescore:
         return rescore(Path(arguments.rescore), arguments.quiet)
-    count = arguments.cases or (6 if arguments.quick else 30)
-    sequence = case_sequence(arguments.split, quick=arguments.quick)
-    for _ in range(arguments.skip):
-        next(sequence)
-    specs = [next(sequence) for _ in range(count)]
+    if arguments.names:
+        specs = arguments.specs
+    else:
+        sequence = case_sequence(arguments.split, quick=arguments.quick)
+        for _ in range(arguments.skip):
+            next(sequence)
+        specs = [next(sequence) for _ in range(arguments.cases or (6 if arguments.quick else 30))]
+    count = len(specs)
+    split = "named" if arguments.names else arguments.split
     suffix = "_quick" if arguments.quick else ""
-    out = Path(arguments.out or HERE / f"diagnosis_families_{arguments.split}{suffix}")
+    out = Path(arguments.out or HERE / f"diagnosis_families_{split}{suffix}")
     started = time.perf_counter()
-    settings = {"split": arguments.split, "quick": arguments.quick, "options": arguments.raw_options,
+    settings = {"split": split, "quick": arguments.quick, "options": arguments.raw_options,
                 "workers": arguments.workers, "cases": [s.name for s in specs],
                 "command": "benchmarks/diagnosis_families.py " + " ".join(sys.argv[1:] if argv is None
                                                                          else argv),

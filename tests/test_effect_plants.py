@@ -288,3 +288,13 @@ def test_rescoring_a_stored_report_keeps_every_outcome(harness, tmp_path):
     assert again["settings"]["command"] == "x" and "--rescore" in again["settings"]["rescored"]
     (tmp_path / "broken.json").write_text("{")
     assert harness.main(["--rescore", str(tmp_path / "broken.json"), "--quiet"]) == 2
+
+
+def test_named_cases_run_instead_of_a_split_and_a_bad_name_is_one_line(harness, capsys):
+    """``--names`` takes cases already looked at (a record's misses re-run with newer code);
+    a malformed name is refused with what was expected, never a traceback."""
+    arguments = harness.parse_arguments(["--names", "two-mass/offset/129", "--quick"])
+    assert [s.name for s in arguments.specs] == ["two-mass/offset/129"]
+    with pytest.raises(SystemExit):
+        harness.parse_arguments(["--names", "two-mass/offset"])
+    assert "expected FAMILY/LABEL/SEED" in capsys.readouterr().err
