@@ -307,9 +307,8 @@ def lacks_linear_dynamics(search: Search, current: np.ndarray, model: Model) -> 
         if any(level - fits[o] > LINEAR_SHORTFALL for o, level in search.linear_level.items()
                if o in fits):
             return True
-    trained = dict(model.fit_train)
-    return any(level - trained[o] > LINEAR_SHORTFALL
-               for o, level in (search.linear_training or {}).items() if o in trained)
+    return any(level - model.fit_train[o] > LINEAR_SHORTFALL
+               for o, level in (search.linear_training or {}).items() if o in model.fit_train)
 
 
 def _linear(structure: AugmentedStructure, parameters: Mapping[str, float],
@@ -462,8 +461,8 @@ def refit(structure: AugmentedStructure, model: Model, train: IdentificationData
         start = {k: float(min(max(v, bounds[k][0]), bounds[k][1])) if k in bounds else v
                  for k, v in start.items()}
         if factor == 1.0:
-            start = located_mode(structure, located_lag(
-                structure, located_zone(structure, start, train), train), train)
+            for locate in LOCATORS:  # each returns `start` unchanged for the other effects
+                start = locate(structure, start, train)
         if own and factor == 1.0 and not from_defaults:
             # staged: the effect's own parameters first, the nominal held where it is (a few
             # well-conditioned unknowns; its static balance free where the effect moves it),
@@ -629,7 +628,7 @@ def located_mode(structure: AugmentedStructure, start: Mapping[str, float],
     zero, where the frequency has no gradient left (the mode uncoupled), and the extra mode was
     rejected at the nominal's 52 % while a linear black box reached 98 %. Other effects return
     `start` unchanged."""
-    if structure.effect != "extra_mode" or getattr(structure, "mode", None) != "inside" or \
+    if structure.effect != "extra_mode" or structure.mode != "inside" or \
             not {"m_e", "f_e"} <= set(structure.effect_parameters):
         return dict(start)
     carrier = float(start.get(f"m{structure.setting.get('attached')}", math.nan))
@@ -640,6 +639,11 @@ def located_mode(structure: AugmentedStructure, start: Mapping[str, float],
     return _best_on_grid(structure, train, start, (
         {"m_e": share * carrier, "f_e": float(frequency)} for share in MODE_MASS_SHARES
         for frequency in np.geomspace(low, high, MODE_FREQUENCIES)))
+
+
+#: The grid searches :func:`refit` runs on a start, in this order: a dead zone's centre and
+#: width, a delay's or a lag's value, an extra mass's size and frequency.
+LOCATORS = (located_zone, located_lag, located_mode)
 
 
 def _training_cost(structure: AugmentedStructure, train: IdentificationData,

@@ -115,13 +115,19 @@ def residuals(structure: ModelStructure, parameters: Mapping[str, float],
     return y_hat, np.where(np.isfinite(data.outputs), data.outputs - y_hat, 0.0)
 
 
+def _autocovariance(values: np.ndarray, count: int) -> np.ndarray:
+    """The first `count` lags (0 included) of the unnormalised autocovariance of `values` about
+    their mean, by FFT (zero-padded: no wrap-around)."""
+    eps = np.asarray(values, float) - np.mean(values)
+    size = 1 << int(np.ceil(np.log2(2 * len(eps))))
+    spectrum = np.fft.rfft(eps, size)
+    return np.fft.irfft(np.abs(spectrum) ** 2, size)[:count]
+
+
 def effective_samples(residual: np.ndarray, max_lag: int = 50) -> float:
     """``N_eff = N / (1 + 2 sum_{tau=1..M} r(tau)^2)`` of one residual."""
-    eps = np.asarray(residual, float) - np.mean(residual)
-    n = len(eps)
-    size = 1 << int(np.ceil(np.log2(2 * n)))
-    spectrum = np.fft.rfft(eps, size)
-    r = np.fft.irfft(np.abs(spectrum) ** 2, size)[:min(max_lag, n - 1) + 1]
+    n = len(residual)
+    r = _autocovariance(residual, min(max_lag, n - 1) + 1)
     if r[0] <= 0:
         return float(n)
     rho = r[1:] / r[0]
@@ -661,18 +667,27 @@ sensor's the cost stays below 0.7 points (:func:`systematic_cost`): 10 is fourte
 Not taken from the benchmark families' labels."""
 
 
-def _block_estimates(eps: np.ndarray, y_hat: np.ndarray, ok: np.ndarray,
-                     blocks: int) -> tuple[np.ndarray, np.ndarray]:
-    """Per block of the record (`blocks` of them, those with more than 3 valid samples): the
-    centre sample and the least-squares ``[a, b]`` of ``eps = a + b (y_hat - mean(y_hat))``."""
-    parts = [p for p in np.array_split(np.flatnonzero(ok), blocks) if len(p) > 3]
-    centre, estimates = [], []
-    for index in parts:
-        x = y_hat[index] - np.mean(y_hat[ok])
-        basis = np.column_stack([np.ones(len(index)), x])
-        estimates.append(np.linalg.lstsq(basis, eps[index], rcond=None)[0])
-        centre.append(float(np.mean(index)))
-    return np.asarray(centre), np.asarray(estimates).reshape(len(parts), 2)
+def _block_fits(eps: np.ndarray, y_hat: np.ndarray, ok: np.ndarray, blocks: int,
+                with_time: bool = False) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The valid samples of the record cut into `blocks` blocks; in each, ``eps`` regressed on
+    ``[1, y_hat - mean(y_hat)]`` (`with_time`: and the sample number about the block's centre).
+    Returns the centre sample and the coefficients of the blocks with more than 3 samples, and
+    the residual of every block's own fit over all valid samples."""
+    index = np.flatnonzero(ok)
+    level = np.mean(y_hat[ok])
+    centre, coefficients, rest = [], [], np.zeros(len(index))
+    for part in np.array_split(np.arange(len(index)), blocks):
+        columns = [np.ones(len(part)), y_hat[index[part]] - level]
+        if with_time:
+            columns.append(part - np.mean(part))
+        basis, values = np.column_stack(columns), eps[index[part]]
+        fitted = np.linalg.lstsq(basis, values, rcond=None)[0]
+        rest[part] = values - basis @ fitted
+        if len(part) > 3:
+            coefficients.append(fitted)
+            centre.append(float(np.mean(index[part])))
+    return (np.asarray(centre), np.asarray(coefficients).reshape(len(centre), len(columns)),
+            rest)
 
 
 #: Random orders of the block estimates the serial test (:func:`drift_test`) compares with.
@@ -689,19 +704,11 @@ def _within_time(eps: np.ndarray, y_hat: np.ndarray, ok: np.ndarray, blocks: int
     each block's own ``a + b y_hat + c t`` is removed (a drift is smooth: within a block it is
     a line in time, so what is left is the noise), ``1 + 2 sum rho_k`` summed up to the first
     negative ``rho_k``: what makes neighbouring block estimates agree without any drift."""
-    rest = np.zeros(int(np.sum(ok)))
-    index = np.flatnonzero(ok)
-    for part in np.array_split(np.arange(len(index)), blocks):
-        x = y_hat[index[part]] - np.mean(y_hat[ok])
-        basis = np.column_stack([np.ones(len(part)), x, part - np.mean(part)])
-        values = eps[index[part]]
-        rest[part] = values - basis @ np.linalg.lstsq(basis, values, rcond=None)[0]
+    rest = _block_fits(eps, y_hat, ok, blocks, with_time=True)[2]
     n = len(rest)
     if n < 32:
         return 1.0
-    size = 1 << int(np.ceil(np.log2(2 * n)))
-    spectrum = np.fft.rfft(rest - np.mean(rest), size)
-    r = np.fft.irfft(np.abs(spectrum) ** 2, size)[:max(n // blocks // 2, 2)]
+    r = _autocovariance(rest, max(n // blocks // 2, 2))
     if r[0] <= 0:
         return 1.0
     rho = r[1:] / r[0]
@@ -766,14 +773,14 @@ def drift_test(residual: np.ndarray, simulated: np.ndarray, *, blocks: int = 8,
     Returns the names of the drifting terms."""
     eps, y_hat = np.asarray(residual, float), np.asarray(simulated, float)
     ok = np.isfinite(eps) & np.isfinite(y_hat)
-    centre, estimates = _block_estimates(eps, y_hat, ok, blocks)
+    centre, estimates, _ = _block_fits(eps, y_hat, ok, blocks)
     if len(centre) < 4:
         return []
     t = centre - np.mean(centre)
     serial_blocks = min(serial_blocks, int(np.sum(ok) // (SERIAL_SPAN * _within_time(
         eps, y_hat, ok, serial_blocks))))
-    _, serial = _block_estimates(eps, y_hat, ok, serial_blocks) if serial_blocks >= 8 else \
-        (None, np.zeros((0, 2)))
+    serial = _block_fits(eps, y_hat, ok, serial_blocks)[1] if serial_blocks >= 8 else \
+        np.zeros((0, 2))
     found = []
     quantile = float(stats.t.isf(alpha / 4, len(centre) - 2))
     for k, name in enumerate(("offset", "gain")):
