@@ -239,7 +239,7 @@ def fit_error_model(u: np.ndarray, residual: np.ndarray, sample_period: float, *
     theta, *_ = np.linalg.lstsq(phi, eps[rows], rcond=None)
     dof = max(len(phi) - phi.shape[1], 1)
     sigma2 = float(np.sum((eps[rows] - phi @ theta) ** 2) / dof)
-    covariance = sigma2 * np.linalg.pinv(phi.T @ phi)
+    factor = _covariance_factor(phi, sigma2)
     frequencies = np.linspace(0.0, 0.5 / sample_period, n_frequencies)
     shift = np.exp(-2j * np.pi * frequencies * sample_period)
     a_poly = 1 + sum(theta[u.shape[1] * order_b + k - 1] * shift ** k for k in range(1, order_a + 1))
@@ -252,7 +252,7 @@ def fit_error_model(u: np.ndarray, residual: np.ndarray, sample_period: float, *
         jac = np.zeros((phi.shape[1], len(shift)), complex)
         jac[i * order_b:(i + 1) * order_b] = powers_b / a_poly
         jac[u.shape[1] * order_b:] = -g * powers_a / a_poly
-        radius.append(level * np.sqrt(_largest_variance(jac, covariance)))
+        radius.append(level * np.sqrt(_largest_variance(jac, factor)))
         response.append(g)
     response, radius = np.array(response), np.array(radius)
     relative = None
@@ -277,12 +277,22 @@ def excited_band(u: np.ndarray, sample_period: float, frequencies: np.ndarray, *
     return level > np.max(power) * 10 ** (-dynamic_range_db / 10)
 
 
-def _largest_variance(jac: np.ndarray, covariance: np.ndarray) -> np.ndarray:
-    """Largest eigenvalue of the 2x2 covariance of (Re G, Im G) per frequency."""
-    jr, ji = jac.real, jac.imag
-    vrr = np.einsum("if,ij,jf->f", jr, covariance, jr)
-    vii = np.einsum("if,ij,jf->f", ji, covariance, ji)
-    vri = np.einsum("if,ij,jf->f", jr, covariance, ji)
+def _covariance_factor(phi: np.ndarray, sigma2: float) -> np.ndarray:
+    """``F`` with ``F F^T = sigma2 (Phi^T Phi)^+`` (the pseudo-inverse's cut-off: singular values
+    of ``Phi^T Phi`` below 1e-15 of the largest dropped), from the SVD of ``Phi``. Quadratic forms
+    through ``F`` are sums of squares, never negative: those through the explicit inverse of an
+    ill-conditioned ``Phi^T Phi`` (steps on an input, 8 nearly equal lagged columns) came out
+    negative by rounding (seen two-mass/extra_mode/2497: a NaN band on the pressure)."""
+    _, s, vt = np.linalg.svd(phi, full_matrices=False)
+    keep = s ** 2 > 1e-15 * s[0] ** 2 if s.size and s[0] > 0 else np.zeros(s.size, bool)
+    return math.sqrt(sigma2) * vt[keep].T / s[keep]
+
+
+def _largest_variance(jac: np.ndarray, factor: np.ndarray) -> np.ndarray:
+    """Largest eigenvalue of the 2x2 covariance of (Re G, Im G) per frequency, the parameters'
+    covariance ``factor factor^T`` (:func:`_covariance_factor`): a Gram matrix, so never negative."""
+    fr, fi = factor.T @ jac.real, factor.T @ jac.imag
+    vrr, vii, vri = np.sum(fr * fr, axis=0), np.sum(fi * fi, axis=0), np.sum(fr * fi, axis=0)
     half_trace = 0.5 * (vrr + vii)
     return half_trace + np.sqrt(np.maximum(0.25 * (vrr - vii) ** 2 + vri ** 2, 0.0))
 
