@@ -179,10 +179,11 @@ class OscillatorStructure(ModelStructure):
 
     def values(self, parameters: Mapping[str, float]) -> dict[str, float]:
         """Nominal values overridden by `parameters`; unknown names and bad values raise."""
-        unknown = sorted(set(parameters) - set(self.parameter_names))
-        if unknown:
-            raise IdentificationError(f"{self.name}: unknown parameters {unknown}")
-        values = {**self.nominal(), **{k: float(v) for k, v in parameters.items()}}
+        names, nominal = self._defaults()
+        if not names.issuperset(parameters):
+            raise IdentificationError(f"{self.name}: unknown parameters "
+                                      f"{sorted(set(parameters) - names)}")
+        values = {**nominal, **{k: float(v) for k, v in parameters.items()}}
         bad = [k for k, v in values.items() if not math.isfinite(v)]
         bad += [f"m{i}" for i in range(1, self.masses + 1) if values[f"m{i}"] <= 0]
         if self.friction:
@@ -192,6 +193,15 @@ class OscillatorStructure(ModelStructure):
             raise IdentificationError(f"{self.name}: invalid parameter values "
                                       f"{ {k: values[k] for k in bad} }")
         return values
+
+    def _defaults(self) -> tuple[frozenset, dict[str, float]]:
+        """The parameter names and :meth:`nominal`, computed once per instance (read only: this
+        runs for every column of the frequency mapping's Jacobians)."""
+        cached = self.__dict__.get("_defaults_cache")
+        if cached is None or cached[0] != self.parameter_names:
+            cached = self.__dict__["_defaults_cache"] = (
+                self.parameter_names, frozenset(self.parameter_names), self.nominal())
+        return cached[1], cached[2]
 
     def matrices(self, parameters: Mapping[str, float]) -> tuple[np.ndarray, ...]:
         """Continuous ``(A, B, C, D)`` for the state ``[z; v]``, inputs ``(eta, p, 1)``, all outputs.
@@ -240,14 +250,14 @@ class OscillatorStructure(ModelStructure):
         inputs = [self._position(INPUT_NAMES, n, "input") for n in data.input_names]
         rows = [self._position(OUTPUT_NAMES + ACCELERATIONS, n, "output")
                 for n in data.output_names]
-        return a, b[:, inputs], c[rows], d[np.ix_(rows, inputs)]
+        return a, b[:, inputs], c[rows], d[rows][:, inputs]
 
     def _with_accelerations(self, a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray
                             ) -> tuple[np.ndarray, np.ndarray]:
         """``C``, ``D`` with the rows of :data:`ACCELERATIONS` below the outputs': the bar's and
         the head's velocity rows of ``A x + B u``."""
         rows = [2 * self.masses - 2, 2 * self.masses - 1]
-        return np.vstack([c, a[rows]]), np.vstack([d, b[rows]])
+        return np.concatenate((c, a[rows])), np.concatenate((d, b[rows]))
 
     def _position(self, names: Sequence[str], name: str, role: str) -> int:
         if name not in names:
