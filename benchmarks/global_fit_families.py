@@ -3,13 +3,14 @@
 Run by hand; writes ``OUT.json`` and ``OUT.md``.
 
     .venv/bin/python benchmarks/global_fit_families.py [--split tune|heldout] [--cases 24]
-        [--workers 2] [--out benchmarks/global_fit_families_tune]
+        [--skip 0] [--workers 2] [--out benchmarks/global_fit_families_tune]
 
 The clean cases of ``benchmarks/effect_plants.py`` (two- and three-mass plants written apart from
 the code under test; APRBS, multisine, chirp or ramps; one or two inputs; one to three outputs;
 50-500 Hz; noise at the drawn SNR), alternately two- and three-mass, at seeds of the requested
 split (``diagnosis_families.split_of``; the held-out seeds start at 100 000, beyond any case the
-diagnosis' held-out judgements have drawn, so none of those is used up). Per case, the
+diagnosis' held-out judgements have drawn, so none of those is used up; ``--skip N`` leaves out
+the split's first N cases, those already looked at). Per case, the
 training run is fitted
 
 - from the plant's true parameters (``fit_least_squares``, 3000 simulations): the reference
@@ -45,16 +46,17 @@ REACHED = 1e-3
 HELDOUT_START = 100_000
 
 
-def cases(split: str, count: int) -> list[tuple[str, int]]:
-    """`count` (family, seed) pairs of `split`, alternately two- and three-mass."""
+def cases(split: str, count: int, skip: int = 0) -> list[tuple[str, int]]:
+    """`count` (family, seed) pairs of `split`, alternately two- and three-mass, after its first
+    `skip`."""
     chosen, seed = [], HELDOUT_START if split == "heldout" else 0
-    while len(chosen) < count:
+    while len(chosen) < skip + count:
         family = ("two-mass", "three-mass")[len(chosen) % 2]
         while diagnosis_families.split_of(family, seed) != split:
             seed += 1
         chosen.append((family, seed))
         seed += 1
-    return chosen
+    return chosen[skip:]
 
 
 def run_case(family: str, seed: int) -> dict:
@@ -118,14 +120,16 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--split", choices=("tune", "heldout"), default="tune")
     parser.add_argument("--cases", type=int, default=24)
+    parser.add_argument("--skip", type=int, default=0)
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--out", default=None)
     arguments = parser.parse_args(argv)
-    if arguments.cases < 1 or arguments.workers < 1:
-        parser.error(f"--cases {arguments.cases} and --workers {arguments.workers}: at least 1")
+    if arguments.cases < 1 or arguments.workers < 1 or arguments.skip < 0:
+        parser.error(f"--cases {arguments.cases} and --workers {arguments.workers}: at least 1; "
+                     f"--skip {arguments.skip}: at least 0")
     out = Path(arguments.out or f"benchmarks/global_fit_families_{arguments.split}")
     started, rows = time.perf_counter(), []
-    pairs = cases(arguments.split, arguments.cases)
+    pairs = cases(arguments.split, arguments.cases, arguments.skip)
     with ProcessPoolExecutor(arguments.workers) as pool:
         for k, row in enumerate(pool.map(run_case, *zip(*pairs)), 1):
             rows.append(row)

@@ -20,3 +20,8 @@ def test_cases_alternate_the_families_within_the_split_asked_for():
 def test_the_global_fit_reaches_the_truth_started_optimum_on_a_two_mass_clean_case():
     row = load_benchmark("global_fit_families").run_case("two-mass", 3)
     assert row["cost"] <= row["reference_cost"] * 1.001, row
+
+
+def test_skip_leaves_out_the_first_cases_of_the_split():
+    bench = load_benchmark("global_fit_families")
+    assert bench.cases("heldout", 4, skip=2) == bench.cases("heldout", 6)[2:]
