@@ -168,7 +168,8 @@ def test_a_structure_without_linear_system_falls_back_and_says_so():
     # the perturbations return to the default fit's minimum, which shows it is one, not that
     # it is the global one
     assert report["agreeing"] == 3 and not report["global_optimum"]
-    assert "3 of 3 starts reached the best cost, 1 of them not a perturbation" in result.message
+    assert "3 of 3 starts reached the best cost, 1 of them independent (not a perturbation" \
+        in result.message
 
 
 # --- the three-mass plant where the default start gets stuck -----------------------------------
@@ -231,7 +232,9 @@ def test_the_three_mass_fit_starts_where_the_data_points_and_reaches_the_noise_f
     assert default["origin"] == "default"
     assert default["fit"]["F_c"] < truth_fit - 3.0  # one LM run from the defaults is stuck
     assert result.fit["F_c"] > truth_fit - 0.3
-    assert report["starts"][1]["origin"] == "data-driven 1" and report["starts"][1]["agrees"]
+    # the best frequency match may be the defaults' own polish (labelled so: not independent)
+    assert report["starts"][1]["origin"].startswith("data-driven 1")
+    assert report["starts"][1]["agrees"]
     assert report["agreeing"] >= 2, result.message  # the perturbation returns
     relative_std = result.details["relative_std"]
     identified = [n for n in TRUTH if relative_std[n] < 0.1 / 3]

@@ -23,9 +23,10 @@ agree ("global optimum found: k of n starts agree", or "not shown: best starts d
 Parameters the best fit marks *not identifiable* (its ``estimates``) are left out of the
 parameter agreement and named: the starts then agree in cost and on the other parameters but
 may sit anywhere along the valley those parameters form ("global optimum found in cost: ...;
-p_gain, F_0 not identifiable from this run (they form a valley: ...)"). A global optimum is claimed only when at least two starts that are not perturbations of the
-best point (the defaults, distinct data-driven starts) reach it: perturbations only show that
-the fit returns to its minimum.
+p_gain, F_0 not identifiable from this run (they form a valley: ...)"). A global optimum is claimed only when at least two independent starts reach it
+(the defaults, distinct data-driven starts; not perturbations of the best point, which only show
+that the fit returns to its minimum, nor the defaults' frequency polish, which begins where the
+defaults' own start does).
 
 Best linear approximation (H1)
     Welch cross-spectra (Hann window, 50 % overlap, mean removed per segment) with ``G_yu[i, j] =
@@ -104,7 +105,7 @@ class FrequencyFitOptions:
     """Distinct candidates returned at most."""
     max_evaluations: int = 5000
     """Frequency-response evaluations per polished start (finite-difference columns included)."""
-    cost_tolerance: float = 1e-8
+    polish_tolerance: float = 1e-8
     """A polished start stops when a step lowers its frequency-response cost by less than this
     fraction (``ftol`` of ``scipy.optimize.least_squares``, its default). 1e-6 took half the
     evaluations on the 96 polished starts of three diagnoses (seen three-mass/actuator_lag/2120,
@@ -173,6 +174,10 @@ class Candidate:
     parameters: Mapping[str, float]
     cost: float
     rms: float
+    from_defaults: bool = False
+    """Polished from the structure's defaults (``polish_defaults``), not from a screening point:
+    :func:`fit_global` does not count its time-domain run as a start independent of the
+    defaults' own."""
 
 
 class _FrequencyProblem:
@@ -211,6 +216,10 @@ class _FrequencyProblem:
         """Real and imaginary weighted errors at the transformed free parameters `z`."""
         return self.weighted(self.response(self.system(z)))
 
+
+#: Origin suffix of a data-driven start polished from the structure's defaults: not counted as
+#: independent of the defaults' own start in the verdict (both begin from the defaults).
+DEFAULTS_POLISHED = " (the defaults, polished)"
 
 #: Residual of an invalid candidate (unstable, singular): large, so that steps avoid it.
 INVALID_RESIDUAL = 1e6
@@ -289,7 +298,7 @@ class _ReducedCost:
 def _polish(cost: _ReducedCost, x: np.ndarray, lo: np.ndarray, hi: np.ndarray,
             max_nfev: int, ftol: float = 1e-8) -> tuple[float, np.ndarray]:
     """One screening point polished by trust-region reflective least squares within the
-    bounds (`ftol`: :attr:`FrequencyFitOptions.cost_tolerance`); its half squared residual and
+    bounds (`ftol`: :attr:`FrequencyFitOptions.polish_tolerance`); its half squared residual and
     end point."""
     batched = {"workers": cost.columns} if BATCHED_COLUMNS else {}
     fit = optimize.least_squares(cost, np.clip(x, lo, hi), bounds=(lo, hi), method="trf",
@@ -363,15 +372,18 @@ def initial_from_data(structure: ModelStructure, data: IdentificationData, free:
     points = [z_start[relevant]] + list(lo + (hi - lo) * sobol.random(options.screening))
     screened = sorted(((_half_square(cost(x)), x) for x in points), key=lambda pair: pair[0])
     chosen = [x for _, x in _distinct(screened, options.starts, options.distinct)]
-    if options.polish_defaults and all(np.max(np.abs(x - points[0])) > options.distinct
-                                       for x in chosen):
+    defaults = options.polish_defaults and all(np.max(np.abs(x - points[0])) > options.distinct
+                                               for x in chosen)
+    if defaults:
         chosen.append(points[0])  # the structure's defaults: polished whatever their screening
     budget = max(1, options.max_evaluations // (int(relevant.sum()) + 1))
     polished = _map(executor, _polish, [cost] * len(chosen), chosen, [lo] * len(chosen),
                     [hi] * len(chosen), [budget] * len(chosen),
-                    [options.cost_tolerance] * len(chosen))
+                    [options.polish_tolerance] * len(chosen))
+    from_defaults = polished[-1][1] if defaults else None
     polished.sort(key=lambda pair: pair[0])
-    return [Candidate(problem.parameters(cost.full(x)), c, math.sqrt(2 * c / size))
+    return [Candidate(problem.parameters(cost.full(x)), c, math.sqrt(2 * c / size),
+                      from_defaults is not None and x is from_defaults)
             for c, x in _distinct(polished, options.candidates, options.distinct)]
 
 
@@ -449,7 +461,8 @@ def fit_global(structure: ModelStructure, data: IdentificationData, *, free: Seq
             runs.append((f"data-driven {k}", runs[0][1], "coincides with the default result"))
             say(f"{structure.name}: data-driven start {k} coincides with the default result")
             continue
-        jobs.append((f"data-driven {k}", candidate.parameters, tuple(note.get("blind", ()))))
+        origin = f"data-driven {k}" + (DEFAULTS_POLISHED if candidate.from_defaults else "")
+        jobs.append((origin, candidate.parameters, tuple(note.get("blind", ()))))
     runs += _starts(run, jobs, options.starts_executor, say)
     rng = np.random.default_rng(options.seed)
     best = min((r for _, r, _ in runs), key=_cost)
@@ -598,16 +611,17 @@ def _verdict(runs: list[tuple[str, IdentificationResult, str]], free: Sequence[s
     n = len(runs)
     reached = sum(s["reached_best_cost"] for s in starts)
     independent = sum(s["agrees"] for s in starts
-                      if not s["origin"].startswith(("perturbation", "polish")))
+                      if not s["origin"].startswith(("perturbation", "polish"))
+                      and not s["origin"].endswith(DEFAULTS_POLISHED))
     if disagreeing:
         verdict = "global optimum not shown: best starts disagree on " + \
             ", ".join(name for name in free if name in disagreeing)
     elif independent >= 2:
         verdict = f"global optimum found{' in cost' if valley else ''}: {agreeing} of {n} " \
-            f"starts agree, {independent} of them not perturbations"
+            f"starts agree, {independent} of them independent (not perturbations)"
     else:
         verdict = f"global optimum not shown: {reached} of {n} starts reached the best cost, " \
-            f"{independent} of them not a perturbation of it"
+            f"{independent} of them independent (not a perturbation of it)"
     if valley:
         verdict += "; " + ", ".join(valley) + " not identifiable from this run " + \
             _valley_remark(starts, valley, options)
