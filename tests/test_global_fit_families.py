@@ -1,7 +1,7 @@
-"""The benchmark of the diagnosis' nominal global fit on the families' clean cases
+"""The benchmark of the diagnosis' nominal fit on the families' clean cases
 (benchmarks/global_fit_families.py): its cases come from the split asked for, and on a two-mass
-clean case the global fit reaches the optimum of the fit started at the plant's true parameters
-(a known optimum, from a plant written apart from the fitted structure)."""
+clean case the diagnosis' nominal fit reaches the optimum of the fit started at the plant's
+true parameters (a known optimum, from a plant written apart from the fitted structure)."""
 from __future__ import annotations
 
 from fixtures.excitations import load_benchmark
@@ -17,7 +17,7 @@ def test_cases_alternate_the_families_within_the_split_asked_for():
     assert min(s for _, s in bench.cases("heldout", 6)) >= bench.HELDOUT_START
 
 
-def test_the_global_fit_reaches_the_truth_started_optimum_on_a_two_mass_clean_case():
+def test_the_diagnosis_nominal_reaches_the_truth_started_optimum_on_a_two_mass_clean_case():
     row = load_benchmark("global_fit_families").run_case("two-mass", 3)
     assert row["cost"] <= row["reference_cost"] * 1.001, row
 
