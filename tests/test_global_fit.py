@@ -4,6 +4,7 @@ in-house Levenberg-Marquardt against SciPy, and a three-mass plant written here 
 the equations of the oscillators' module notes) where the default start gets stuck."""
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -13,6 +14,7 @@ from scipy.integrate import solve_ivp
 
 from panto.identification.diagnosis.pipeline import fit_nominal
 from panto.identification.estimation.base import IdentificationData, ModelStructure, fit_percent
+from panto.identification.estimation import global_fit
 from panto.identification.estimation.global_fit import (GlobalFitOptions,
                                                         best_linear_approximation,
                                                         discrete_frequency_response, fit_global)
@@ -378,3 +380,35 @@ def test_the_polish_evaluates_its_jacobian_columns_together_with_the_same_result
         assert list(plain.parameters) == list(together.parameters)
         assert np.array_equal(list(plain.parameters.values()), list(together.parameters.values()))
         assert (plain.cost, plain.rms) == (together.cost, together.rms)
+
+
+def test_a_mapping_without_one_inputs_columns_adds_candidates_judged_on_every_column():
+    """``FrequencyFitOptions.masked_inputs``: the columns of the pressure are left out of a second
+    mapping (``_without_inputs``: the wire's columns as they were); its candidates are polished
+    again on every column and compete with the first mapping's, so the best candidate's cost is
+    never above the plain mapping's, and a candidate's stated cost is its cost on every column
+    (recomputed here from its parameters by the plain mapping's residual at one point)."""
+    rng = np.random.default_rng(0)
+    t, eta, p = _inputs(20.0, rng)
+    force = _three_mass(t, eta, p)
+    data = IdentificationData(t, np.column_stack([eta, p]),
+                              (force + 0.03 * force.std() * rng.normal(size=len(t)))[:, None],
+                              ("eta", "p"), ("F_c",))
+    bla = best_linear_approximation(data)
+    masked = global_fit._without_inputs(bla, ("p",))
+    assert not masked.trusted[:, :, 1].any() and bla.trusted[:, :, 1].any()
+    assert np.array_equal(masked.trusted[:, :, 0], bla.trusted[:, :, 0])
+    assert global_fit._without_inputs(bla, ("q",)) is None
+    assert global_fit._without_inputs(bla, ("eta", "p")) is None
+    structure = OscillatorStructure(3, outputs=("F_c",))
+    free = structure.default_free()
+    options = global_fit.FrequencyFitOptions(screening=64, starts=4)
+    plain = global_fit.initial_from_data(structure, data, free, bla=bla, options=options)
+    both = global_fit.initial_from_data(structure, data, free, bla=bla, options=dataclasses.replace(
+        options, masked_inputs=("p",)))
+    assert both[0].cost <= plain[0].cost
+    for candidate in both:
+        again = global_fit.initial_from_data(
+            structure, data, free, bla=bla, initial=candidate.parameters,
+            options=dataclasses.replace(options, screening=0, starts=1, max_evaluations=1))
+        assert again[0].cost == pytest.approx(candidate.cost, rel=1e-9)
