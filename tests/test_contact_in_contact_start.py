@@ -29,9 +29,20 @@ def test_a_flying_head_is_named_from_the_in_contact_start():
     assert min(gains.values()) > 0.0 and gains["y_cb"] > 30.0 and gains["xi"] > 30.0, gains
 
 
-def test_without_the_in_contact_start_the_same_run_is_unexplained(monkeypatch):
+def test_without_the_in_contact_start_the_same_run_is_never_diagnosed_better(monkeypatch):
+    """The control: whether the other starts reach the unilateral basin depends on the machine's
+    rounding (measured on this case: with NumPy's AVX-512 loops, session 43's machine, and on
+    session 42's machine `unexplained` without the in-contact start; with them switched off,
+    ``NPY_DISABLE_CPU_FEATURES="X86_V4 AVX512_ICL"``, the same `contact_loss` as with it, F_c
+    30.9 %, y_cb 79.4 %, xi 76.7 %). What holds on every machine: without the start no output
+    validates better, and the verdict names no other effect."""
+    with_start = _diagnosis()
+
     def refused(*arguments, **keywords):
         raise refit_module.IdentificationError("in-contact start switched off for this test")
 
     monkeypatch.setattr(refit_module, "_in_contact_refit", refused)
-    assert _diagnosis().effects == ()
+    without = _diagnosis()
+    assert without.effects in ((), ("contact_loss",)), without.summary
+    assert all(without.fit_after[o] <= with_start.fit_after[o] + 1e-9 for o in without.fit_after), \
+        (without.fit_after, with_start.fit_after)

@@ -387,7 +387,10 @@ def test_a_mapping_without_one_inputs_columns_adds_candidates_judged_on_every_co
     mapping (``_without_inputs``: the wire's columns as they were); its candidates are polished
     again on every column and compete with the first mapping's, so the best candidate's cost is
     never above the plain mapping's, and a candidate's stated cost is its cost on every column
-    (recomputed here from its parameters by the plain mapping's residual at one point)."""
+    (recomputed here from its parameters by the plain mapping's residual at one point). On this
+    plant the small mapping (64 points, 4 polished) misses the plant's basin (measured: best
+    weighted error rms 1.27, m1 17 kg); without the pressure's columns it finds it (rms 0.72,
+    m1 9.8 kg, k2 11 984 N/m, p_gain 75.1 for the plant's 10, 12 000, 80)."""
     rng = np.random.default_rng(0)
     t, eta, p = _inputs(20.0, rng)
     force = _three_mass(t, eta, p)
@@ -407,6 +410,9 @@ def test_a_mapping_without_one_inputs_columns_adds_candidates_judged_on_every_co
     both = global_fit.initial_from_data(structure, data, free, bla=bla, options=dataclasses.replace(
         options, masked_inputs=("p",)))
     assert both[0].cost <= plain[0].cost
+    best = both[0].parameters
+    assert both[0].rms < 1.0, both[0]
+    assert all(abs(best[k] / TRUTH[k] - 1.0) < 0.1 for k in ("m1", "k2", "p_gain")), best
     for candidate in both:
         again = global_fit.initial_from_data(
             structure, data, free, bla=bla, initial=candidate.parameters,

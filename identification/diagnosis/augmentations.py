@@ -366,7 +366,13 @@ class AugmentedStructure(ModelStructure):
         self._starts[name] = float(min(max(start, low), high))
         self._bounds[name] = (low, high)
 
+    @property
+    def effect_input(self) -> str:
+        """The input an input-side effect acts on (the setting's, else the first actuator)."""
+        return self._input()
+
     def _input(self) -> str:
+        """The input an input-side effect acts on (the setting's, else the first actuator)."""
         name = self.setting.get("input") or self.setting.get("signal")
         if name in self.input_names:
             return str(name)

@@ -344,7 +344,7 @@ def global_refit(structure: AugmentedStructure, train: IdentificationData, free:
     settings = search.options.global_fit or GlobalFitOptions()
     if structure.effect == "actuator_lag":
         settings = dataclasses.replace(settings, frequency=dataclasses.replace(
-            settings.frequency, masked_inputs=(str(structure.setting["input"]),)))
+            settings.frequency, masked_inputs=(structure.effect_input,)))
     result = fit_nominal(structure, free, train, global_fit=settings,
                          initial=dict(first.parameters), default=first, **budget)
     return result, _model(structure, result, free)

@@ -379,19 +379,19 @@ def initial_from_data(structure: ModelStructure, data: IdentificationData, free:
     cost, ends = _mapping(frequency_problem, z_start, lower, upper, options, executor)
     masked = _without_inputs(bla, options.masked_inputs)
     if masked is not None:
-        part = _FrequencyProblem(structure, data, problem, masked, options.relative_floor)
-        _, found = _mapping(part, z_start, lower, upper, options, executor)
-        from_defaults = {id(z): d for _, z, d in found}
-        chosen = _distinct(sorted(((c, z) for c, z, _ in found), key=lambda end: end[0]),
-                           options.candidates, options.distinct)
-        again = _polish_all(cost, [z[cost.relevant] for _, z in chosen], options, executor)
-        ends += [(c, cost.full(x), from_defaults[id(z)])
-                 for (c, x), (_, z) in zip(again, chosen)]
+        try:
+            part = _FrequencyProblem(structure, data, problem, masked, options.relative_floor)
+            _, found = _mapping(part, z_start, lower, upper, options, executor)
+            chosen = _distinct(sorted(found, key=lambda end: end[0]), options.candidates,
+                               options.distinct)
+            again = _polish_all(cost, [z[cost.relevant] for _, z, _ in chosen], options,
+                                executor)
+        except (*_FAILURES, IdentificationError):  # the first mapping's candidates stand
+            chosen, again = [], []
+        ends += [(c, cost.full(x), d) for (c, x), (_, _, d) in zip(again, chosen)]
     ends.sort(key=lambda end: end[0])
-    flags = {id(z): d for _, z, d in ends}
-    return [Candidate(problem.parameters(z), c, math.sqrt(2 * c / cost.size), flags[id(z)])
-            for c, z in _distinct([(c, z) for c, z, _ in ends], options.candidates,
-                                  options.distinct)]
+    return [Candidate(problem.parameters(z), c, math.sqrt(2 * c / cost.size), d)
+            for c, z, d in _distinct(ends, options.candidates, options.distinct)]
 
 
 def _mapping(frequency_problem: _FrequencyProblem, z_start: np.ndarray, lower: np.ndarray,
@@ -402,6 +402,8 @@ def _mapping(frequency_problem: _FrequencyProblem, z_start: np.ndarray, lower: n
     size = len(frequency_problem.residuals(z_start))
     relevant = ~frequency_blind(frequency_problem, z_start)
     cost = _ReducedCost(frequency_problem, z_start, relevant, size, lower, upper)
+    if not relevant.any():
+        raise IdentificationError("no free parameter changes the frequency response")
     lo, hi = cost.lo, cost.hi
     sobol = qmc.Sobol(int(relevant.sum()), scramble=True, seed=options.seed)
     points = [z_start[relevant]] + list(lo + (hi - lo) * sobol.random(options.screening))
@@ -430,11 +432,11 @@ def _without_inputs(bla: BestLinearApproximation, names: Sequence[str]
     """`bla` with the columns of the inputs `names` not trusted; None when that leaves it as it
     is or without any trusted element."""
     columns = [k for k, name in enumerate(bla.input_names) if name in names]
-    if not columns:
-        return None
     trusted = bla.trusted.copy()
     trusted[:, :, columns] = False
-    return dataclasses.replace(bla, trusted=trusted) if trusted.any() else None
+    if np.array_equal(trusted, bla.trusted) or not trusted.any():
+        return None
+    return dataclasses.replace(bla, trusted=trusted)
 
 
 def _half_square(r: np.ndarray) -> float:
@@ -442,13 +444,14 @@ def _half_square(r: np.ndarray) -> float:
     return math.inf if np.all(r == INVALID_RESIDUAL) else 0.5 * float(r @ r)
 
 
-def _distinct(ranked: list[tuple[float, np.ndarray]], count: int, distance: float
-              ) -> list[tuple[float, np.ndarray]]:
-    """The first `count` valid points of `ranked` that differ from each other by `distance`."""
-    chosen: list[tuple[float, np.ndarray]] = []
-    for c, x in ranked:
-        if math.isfinite(c) and all(np.max(np.abs(x - y)) > distance for _, y in chosen):
-            chosen.append((c, x))
+def _distinct(ranked: list[tuple], count: int, distance: float) -> list[tuple]:
+    """The first `count` valid entries ``(cost, point, ...)`` of `ranked` whose points differ
+    from each other by `distance`."""
+    chosen: list[tuple] = []
+    for entry in ranked:
+        if math.isfinite(entry[0]) and all(np.max(np.abs(entry[1] - other[1])) > distance
+                                           for other in chosen):
+            chosen.append(entry)
         if len(chosen) == count:
             break
     return chosen
