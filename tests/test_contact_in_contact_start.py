@@ -6,6 +6,7 @@ two-mass/contact_loss/1598, benchmarks/effect_plants.py: the head off the wire o
 samples, `unexplained`)."""
 from __future__ import annotations
 
+import pytest
 from fixtures.excitations import load_benchmark
 
 from panto.identification.diagnosis import refit as refit_module
@@ -20,8 +21,14 @@ def _diagnosis():
                                              challenge=False, workers=1))
 
 
-def test_a_flying_head_is_named_from_the_in_contact_start():
-    result = _diagnosis()
+@pytest.fixture(scope="module")
+def with_start():
+    """The diagnosis with the in-contact start (both tests read it; about 7 s)."""
+    return _diagnosis()
+
+
+def test_a_flying_head_is_named_from_the_in_contact_start(with_start):
+    result = with_start
     assert result.effects == ("contact_loss",), result.summary
     # every output validates better, the cross bar and the head by tens of points (measured:
     # F_c 26.4 -> 31.3 %, y_cb 32.1 -> 90.7 %, xi -10.6 -> 88.4 %)
@@ -29,15 +36,14 @@ def test_a_flying_head_is_named_from_the_in_contact_start():
     assert min(gains.values()) > 0.0 and gains["y_cb"] > 30.0 and gains["xi"] > 30.0, gains
 
 
-def test_without_the_in_contact_start_the_same_run_is_never_diagnosed_better(monkeypatch):
+def test_without_the_in_contact_start_the_same_run_is_never_diagnosed_better(monkeypatch,
+                                                                             with_start):
     """The control: whether the other starts reach the unilateral basin depends on the machine's
     rounding (measured on this case: with NumPy's AVX-512 loops, session 43's machine, and on
     session 42's machine `unexplained` without the in-contact start; with them switched off,
     ``NPY_DISABLE_CPU_FEATURES="X86_V4 AVX512_ICL"``, the same `contact_loss` as with it, F_c
     30.9 %, y_cb 79.4 %, xi 76.7 %). What holds on every machine: without the start no output
     validates better, and the verdict names no other effect."""
-    with_start = _diagnosis()
-
     def refused(*arguments, **keywords):
         raise refit_module.IdentificationError("in-contact start switched off for this test")
 

@@ -320,21 +320,21 @@ class AugmentedStructure(ModelStructure):
         scale = float(s.get("scale", 1.0) or 1.0)
         wide = lambda start, size: (-max(100 * abs(start), 100 * size), max(100 * abs(start), 100 * size))
         if effect == "input_delay":
-            name = f"input_delay:{self._input()}"
+            name = f"input_delay:{self.effect_input}"
             self._add(name, float(s.get("delay_s", 0.01)), (0.0, float(s.get("max_delay_s", 1.0))))
         elif effect == "actuator_lag":
-            name = f"actuator_lag:{self._input()}"
+            name = f"actuator_lag:{self.effect_input}"
             self._add(name, float(s.get("time_constant_s", 0.05)),
                       (0.0, 100.0 * float(s.get("time_constant_s", 0.05))))
         elif effect == "dead_zone":
             width = float(s.get("width", s.get("half_width", 0.0)))
-            self._add(f"dead_zone:{self._input()}", width, (0.0, 10.0 * max(width, 1e-9)))
+            self._add(f"dead_zone:{self.effect_input}", width, (0.0, 10.0 * max(width, 1e-9)))
             if "spread" in s:  # where the zone lies is not known either: about the median first
                 centre, spread = float(s.get("centre", 0.0)), max(float(s["spread"]), 1e-12)
-                self._add(f"dead_zone:{self._input()}:centre", centre,
+                self._add(f"dead_zone:{self.effect_input}:centre", centre,
                           (centre - spread, centre + spread))
         elif effect == "saturation":
-            signal = s.get("signal", self._input())
+            signal = s.get("signal", self.effect_input)
             low, high = float(s.get("low", -1.0)), float(s.get("high", 1.0))
             margin = 10.0 * max(high - low, 1e-9)
             self._add(f"saturation:{signal}:low", low, (low - margin, high))
@@ -368,10 +368,6 @@ class AugmentedStructure(ModelStructure):
 
     @property
     def effect_input(self) -> str:
-        """The input an input-side effect acts on (the setting's, else the first actuator)."""
-        return self._input()
-
-    def _input(self) -> str:
         """The input an input-side effect acts on (the setting's, else the first actuator)."""
         name = self.setting.get("input") or self.setting.get("signal")
         if name in self.input_names:
@@ -449,7 +445,7 @@ class AugmentedStructure(ModelStructure):
         if not callable(getattr(self.base, "linear_system", None)):
             raise NotImplementedError(f"{self.name}: {self.base.name} gives no linear system")
         inner = {k: v for k, v in parameters.items() if k not in self._bounds}
-        name = self._input()
+        name = self.effect_input
         lag = float({**self._starts, **parameters}[f"actuator_lag:{name}"])
         a, b, c, d = (np.array(m, float) for m in self.base.linear_system(inner, data))
         if not lag > 1e-6 * data.sample_period:
@@ -569,7 +565,7 @@ class AugmentedStructure(ModelStructure):
         sample or more is simulated on the samples, as before: refining every fractional delay
         made the demo's diagnosis and the suite's diagnosis tests markedly slower (a refined
         simulation costs about ten of one on the samples)."""
-        name = self._input()
+        name = self.effect_input
         if self.effect == "actuator_lag":
             lag = values[f"actuator_lag:{name}"]
             return 1 if not lag > 0.0 else int(min(8, max(1, math.ceil(4.0 * period / lag))))
@@ -580,7 +576,7 @@ class AugmentedStructure(ModelStructure):
 
     def _transform_inputs(self, values: Mapping[str, float], data: IdentificationData
                           ) -> IdentificationData:
-        name = self._input()
+        name = self.effect_input
         index = data.input_names.index(name)
         u = np.array(data.inputs[:, index], float)
         if self.effect == "input_delay":
@@ -627,7 +623,7 @@ class AugmentedStructure(ModelStructure):
                 acceleration = sensor_acceleration(position, data.sample_period)
             y[:, target] -= values[f"sensor_inertia:{self._force()}"] * acceleration
         elif effect == "extra_mode":
-            drive = self._signal(s.get("drive") or self._input(), data, y)
+            drive = self._signal(s.get("drive") or self.effect_input, data, y)
             y[:, target] += values["extra_mode:gain"] * mode_response(
                 drive - drive[0], values["extra_mode:frequency"], values["extra_mode:damping"],
                 data.sample_period)

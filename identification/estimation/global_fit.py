@@ -401,9 +401,9 @@ def _mapping(frequency_problem: _FrequencyProblem, z_start: np.ndarray, lower: n
     ``(cost, all transformed parameters, polished from the defaults)`` per polished start."""
     size = len(frequency_problem.residuals(z_start))
     relevant = ~frequency_blind(frequency_problem, z_start)
-    cost = _ReducedCost(frequency_problem, z_start, relevant, size, lower, upper)
     if not relevant.any():
         raise IdentificationError("no free parameter changes the frequency response")
+    cost = _ReducedCost(frequency_problem, z_start, relevant, size, lower, upper)
     lo, hi = cost.lo, cost.hi
     sobol = qmc.Sobol(int(relevant.sum()), scramble=True, seed=options.seed)
     points = [z_start[relevant]] + list(lo + (hi - lo) * sobol.random(options.screening))
