@@ -101,7 +101,8 @@ from panto.identification.diagnosis.challenge import (challenge, challengeable, 
 from panto.identification.diagnosis.effects import EFFECTS, SignalRoles
 from panto.identification.diagnosis.nominal import (Progress, adequacy_quietly, adequate_nominal,
                                                     black_box_validation, fit_nominal,
-                                                    fit_per_output, indented, simulate)
+                                                    fit_per_output, indented, mapping_candidates,
+                                                    simulate)
 from panto.identification.diagnosis.parallel import map_trials, resolve_workers, trial_pool
 from panto.identification.diagnosis.augmentations import INPUT_SIDE
 from panto.identification.diagnosis.ranking import RIVALS, rank_candidates
@@ -373,8 +374,10 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
         if adequacy is not None and adequacy.verdict == "cannot express" else None
     with trial_pool(resolve_workers(options.workers), executor) as pool:
         model, current, rounds, steps, accepted, left = _search(
-            model, before, candidates, Search(train, validation, roles, options, fit_options, say,
-                                              linear_level, linear_training), pool)
+            model, before, candidates, Search(
+                train, validation, roles, options, fit_options, say, linear_level,
+                linear_training, linear_reference=getattr(adequacy, "black_box", None),
+                nominal_candidates=mapping_candidates(result)), pool)
         remaining_gap = left if left is not None else (
             _gap(model, validation, current, roles) if steps else gap)
         fit_after = fit_per_output(validation, current)
