@@ -131,7 +131,7 @@ def test_a_sensor_mass_gets_its_global_refit_where_the_black_box_does_not_valida
     assert result.fit_after["F_c"] > case.ceiling["F_c"] - 0.2, (result.summary, case.ceiling)
 
 
-def test_a_sensor_masss_global_refit_matches_the_black_boxs_response():
+def test_a_sensor_mass_refit_matched_to_the_black_box_reaches_the_plant():
     """The seen held-out case two-mass/sensor_inertia/1386 (0.96 kg above the head, contact force
     only, a chirp at 100 Hz, 20 s): the H1 estimate of so short a record leaks (the plant's own
     parameters have weighted error rms 29 against it), the global refit's data-driven starts

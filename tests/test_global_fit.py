@@ -427,9 +427,11 @@ def test_a_mapping_without_one_inputs_columns_adds_candidates_judged_on_every_co
 
 def test_a_reference_models_response_replaces_the_estimate_where_it_has_the_signals():
     """``reference_response``: the elements of the H1 estimate between signals a discrete linear
-    model has (its inputs in another order here) become that model's response, the exact one of
+    model has (one input of two here, at another index) become that model's response, the exact one of
     ``scipy.signal.dfreqresp`` (an independent path), with the estimate's trusted frequencies
-    and weights; the column of an input the model lacks is no longer trusted; a model of
+    and weights; the column of an input the model lacks is no longer trusted, nor a frequency
+    where the model has a pole (z = 1: the estimate's zero frequency, never trusted, shows the
+    response is not computed there; at a trusted one it becomes untrusted); a model of
     another sample period is refused with both periods named."""
     rng = np.random.default_rng(5)
     n = 4096
@@ -446,7 +448,10 @@ def test_a_reference_models_response_replaces_the_estimate_where_it_has_the_sign
         "blackbox-2", details)
     target = global_fit.reference_response(bla, reference)
     exact = signal.dfreqresp((a, b, c, d, 1.0 / RATE), w=2 * np.pi * bla.frequency / RATE)[1]
-    assert np.allclose(target.response[:, 0, 1], np.ravel(exact), rtol=1e-12, atol=1e-12)
+    kept = bla.trusted[:, 0, 1]  # computed where the estimate is trusted, the only place used
+    assert kept.sum() > 50
+    assert np.allclose(target.response[kept, 0, 1], np.ravel(exact)[kept], rtol=1e-12,
+                       atol=1e-12)
     assert np.array_equal(target.trusted[:, 0, 1], bla.trusted[:, 0, 1])
     assert bla.trusted[:, 0, 0].any() and not target.trusted[:, 0, 0].any()
     assert np.array_equal(target.std, bla.std) and np.array_equal(target.frequency,
@@ -454,6 +459,11 @@ def test_a_reference_models_response_replaces_the_estimate_where_it_has_the_sign
     other = dataclasses.replace(reference, details={**details, "sample_period": 0.01})
     with pytest.raises(global_fit.IdentificationError, match=r"0\.01 s, the data's 0\.005 s"):
         global_fit.reference_response(bla, other)
+    assert bla.frequency[0] == 0.0 and not bla.trusted[0].any()
+    integrator = dataclasses.replace(reference, details={**details, "A": [[1.0, 0.0], [0.0, 0.5]]})
+    held = global_fit.reference_response(bla, integrator)  # singular at z = 1 only
+    assert np.array_equal(held.trusted[:, 0, 1], bla.trusted[:, 0, 1])
+    assert np.all(np.isfinite(held.response[held.trusted]))
 
 
 def test_a_black_box_of_the_record_leads_the_mapping_to_the_plants_basin():
@@ -474,3 +484,27 @@ def test_a_black_box_of_the_record_leads_the_mapping_to_the_plants_basin():
     led = global_fit.initial_from_data(structure, data, free, options=options, reference=box)
     best = led[0].parameters
     assert all(abs(best[k] / TRUTH[k] - 1.0) < 0.1 for k in ("m1", "k2", "p_gain")), best
+
+
+def test_seeds_are_polished_beside_the_screening_and_a_seed_outside_a_log_domain_is_left_out():
+    """``seeds``: with a screening of 8 points and 1 polished start (which alone misses the
+    plant's basin here), the plant's own parameters given as a seed come out as the best
+    candidate, polished (within 10 % on m1, k2, p_gain), and not marked as polished from the
+    defaults (only the defaults' entry is); a seed with a negative mass (outside the logarithmic
+    transform's domain) is left out, and the result is the one without it."""
+    data = _short_record()
+    structure = OscillatorStructure(3, outputs=("F_c",))
+    free = structure.default_free()
+    options = global_fit.FrequencyFitOptions(screening=8, starts=1)
+    plain = global_fit.initial_from_data(structure, data, free, options=options)
+    assert not all(abs(plain[0].parameters[k] / TRUTH[k] - 1.0) < 0.1
+                   for k in ("m1", "k2", "p_gain")), plain[0]
+    seeded = global_fit.initial_from_data(structure, data, free, options=options,
+                                          seeds=[TRUTH])
+    best = seeded[0].parameters
+    assert all(abs(best[k] / TRUTH[k] - 1.0) < 0.1 for k in ("m1", "k2", "p_gain")), best
+    assert not seeded[0].from_defaults
+    assert sum(c.from_defaults for c in seeded) <= 1
+    bad = global_fit.initial_from_data(structure, data, free, options=options,
+                                       seeds=[{"m1": -1.0}])
+    assert [c.cost for c in bad] == [c.cost for c in plain]

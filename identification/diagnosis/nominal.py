@@ -48,10 +48,11 @@ def fit_nominal(nominal: ModelStructure, free: Sequence[str], train: Identificat
     :func:`~panto.identification.estimation.least_squares.fit_least_squares` run from the
     defaults (`options` go to it). With `global_fit`,
     :func:`~panto.identification.estimation.global_fit.fit_global` with those options (from the
-    defaults, from the data's frequency response where the structure has ``linear_system``, and
-    perturbations; its verdict ends the result's ``message``); ``executor`` and
-    ``max_evaluations`` in `options` override the ones of `global_fit`, ``progress``,
-    ``initial``, ``bounds`` are passed on, the rest go to every least-squares run.
+    defaults, from the data's frequency response where the structure has ``linear_system`` (or
+    a ``reference`` model's: the adequacy's black box), and perturbations; its verdict ends the
+    result's ``message``); ``executor`` and ``max_evaluations`` in `options` override the ones
+    of `global_fit`, ``progress``, ``initial``, ``bounds``, ``default``, ``reference`` and
+    ``seeds`` are passed on, the rest go to every least-squares run.
     Not yet the default of :func:`diagnose`: on ``tests/test_diagnosis_effects.py``'s
     ``actuator_lag`` case the better nominal absorbs most of the hidden pressure lag and the
     verdict turns ``unexplained`` (the diagnosis' acceptance must first learn to judge a nominal

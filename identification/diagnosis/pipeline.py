@@ -32,7 +32,9 @@ causes it, and how far the gap shrinks once that effect is in the model.
    better than the current model (or fits the training run better by as much where its F test
    found that the structure cannot express the data), every candidate adding dynamics (lag, delay, sensor mass,
    extra mode) is refitted as well, on every input it can enter, whatever its rank, and such a
-   refit gets a second start (:func:`~panto.identification.diagnosis.refit.lacks_linear_dynamics`):
+   refit gets a second start (:func:`~panto.identification.diagnosis.refit.lacks_linear_dynamics`;
+   also, whatever the black box, where its refit is decisive on training but validates worse:
+   :func:`~panto.identification.diagnosis.refit.trapped`):
    from the structure's defaults, or by the nominal's own global method where the augmented
    structure gives its frequency response (a sensor mass on a simulated head:
    :func:`~panto.identification.diagnosis.refit.global_refit`); a passing refit is kept unless the

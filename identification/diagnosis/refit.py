@@ -6,8 +6,9 @@ AugmentedStructure`, refits it on the training run (:func:`refit`: a dead zone's
 and a delay's or a lag's value first taken from grids (:func:`located_zone`,
 :func:`located_lag`), the effect's own parameters first with the nominal held, then everything; once more from the effect's neutral values when the
 ranked start ends below the model it extends; when rejected, for an effect inside the dynamics, or
-a linear one adding dynamics the adequacy's black box shows missing, once more from the
-structure's defaults, the lower training cost kept), simulates it on the validation run and judges
+a linear one adding dynamics the adequacy's black box shows missing or whose refit is
+:func:`trapped`, once more from the structure's defaults or by the nominal's global method
+(:func:`global_refit`), the lower training cost kept), simulates it on the validation run and judges
 it (:func:`~panto.identification.diagnosis.support.judge_trial`; a nonlinear effect must also
 validate better than the adequacy's linear black box, :func:`linear_explains`). The round's trials
 run in parallel through :mod:`~panto.identification.diagnosis.parallel`. A refit that stopped on
@@ -43,7 +44,7 @@ ADDS_DYNAMICS = ("actuator_lag", "input_delay", "sensor_inertia", "extra_mode")
 #: output, on the validation run (or on the training run where its F test found the structure
 #: cannot express the data: :func:`lacks_linear_dynamics`), before an :data:`ADDS_DYNAMICS`
 #: refit gets a second start (the 2-point relevance of a strong effect in the independent
-#: families).
+#: families); a :func:`trapped` refit gets it whatever the shortfall.
 LINEAR_SHORTFALL = 2.0
 
 
@@ -179,7 +180,8 @@ def _try_one(model: Model, candidate: Mapping[str, Any], current: np.ndarray,
             # an effect inside the dynamics (contact loss, friction, a hardening spring) bends
             # the nominal fitted without it far from its own optimum (a flying head fitted with
             # a bilateral contact), and so does a linear one that adds dynamics while a linear
-            # black box shows them missing; the refit from there can stop short: once more from
+            # black box shows them missing or its refit is trapped (decisive on training,
+            # worse on the withheld run); the refit from there can stop short: once more from
             # the structure's defaults, the better training cost kept. A dynamic one even when
             # it passes: a bellow lag partly absorbed by the nominal passed at +0.30 points from
             # there and reached +1.66 from the defaults (seen held-out three-mass/actuator_lag/

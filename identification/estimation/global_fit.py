@@ -7,8 +7,10 @@ points and compares where they end:
 
 1. the structure's defaults (what a plain fit does);
 2. data-driven starts (:func:`initial_from_data`): the *best linear approximation* of the data
-   (:func:`best_linear_approximation`, no structure involved) is matched by the structure's own
-   frequency response, which needs no time simulation and is cheap, from many quasi-random starts;
+   (:func:`best_linear_approximation`, no structure involved), or the response of a linear model
+   fitted to the same record where one is given (``reference``, below), is matched by the
+   structure's own frequency response, which needs no time simulation and is cheap, from many
+   quasi-random starts (and given ``seeds``);
 3. a few random perturbations of the best point found, ``perturbation_size`` standard deviations
    of its estimate (at most ``perturbation_cap``): a lightly damped mode leaves a valley in the
    output-error cost narrower than its damping ratio, so fixed-size perturbations (tried: 5 %
@@ -375,7 +377,8 @@ def initial_from_data(structure: ModelStructure, data: IdentificationData, free:
                       executor: Any = None,
                       reference: IdentificationResult | None = None,
                       seeds: Sequence[Mapping[str, float]] = ()) -> list[Candidate]:
-    """Data-driven start values: the structure's frequency response fitted to the data's.
+    """Data-driven start values: the structure's frequency response fitted to the data's (or to
+    a `reference` model's).
 
     Parameters
     ----------
@@ -412,8 +415,10 @@ def initial_from_data(structure: ModelStructure, data: IdentificationData, free:
     frequency_problem = _FrequencyProblem(structure, data, problem, bla, options.relative_floor)
     z_start = np.clip(z0, lower, upper)
     start = dict(problem.parameters(z_start))
-    extra = [np.clip(problem.z_of(np.array([{**start, **seed}[n] for n in problem.free])),
-                     lower, upper) for seed in seeds]
+    with np.errstate(invalid="ignore"):
+        extra = [np.clip(problem.z_of(np.array([{**start, **seed}[n] for n in problem.free],
+                                               float)), lower, upper) for seed in seeds]
+    extra = [z for z in extra if np.all(np.isfinite(z))]  # a seed outside a log bound's domain
     cost, ends = _mapping(frequency_problem, z_start, lower, upper, options, executor, extra)
     masked = _without_inputs(bla, options.masked_inputs)
     if masked is not None:
@@ -439,7 +444,9 @@ def reference_response(bla: BestLinearApproximation, reference: IdentificationRe
     acting on the inputs' deviations, ``sample_period``, ``input_names``, ``output_names``; the
     black box of :func:`~panto.identification.structures.blackbox.fit_state_space`). The
     frequencies, weights and trusted elements stay `bla`'s; an element between an input or
-    output the model does not have (a constant input it left out) is no longer trusted."""
+    output the model does not have (a constant input it left out), or at a frequency where the
+    model has a pole, is no longer trusted. Raises IdentificationError where no trusted element
+    is left or the sample periods differ."""
     details = reference.details
     try:
         a, b, c, d = (np.asarray(details[k], float) for k in ("A", "B", "C", "D"))
@@ -451,16 +458,22 @@ def reference_response(bla: BestLinearApproximation, reference: IdentificationRe
     if not math.isclose(period, bla.period, rel_tol=1e-9):
         raise IdentificationError(f"reference {reference.structure}: sample period {period} s, "
                                   f"the data's {bla.period} s")
-    z = np.exp(2j * np.pi * bla.frequency * period)
     eye = np.eye(len(a))
-    model = np.array([c @ np.linalg.solve(zk * eye - a, b) + d for zk in z])
+    model = np.full(bla.response.shape[:1] + (len(outputs), len(inputs)), np.nan, complex)
+    for k in np.flatnonzero(bla.trusted.any(axis=(1, 2))):  # the others are never matched
+        try:  # a pole of the model at a frequency (z = 1: a root at the tanh's limit) -> NaN
+            model[k] = c @ np.linalg.solve(np.exp(2j * np.pi * bla.frequency[k] * period) * eye
+                                           - a, b) + d
+        except np.linalg.LinAlgError:
+            pass
     response, trusted = np.array(bla.response), np.zeros_like(bla.trusted)
     for i, name in enumerate(bla.output_names):
         for j, input_name in enumerate(bla.input_names):
             if name in outputs and input_name in inputs:
-                response[:, i, j] = model[:, outputs.index(name), inputs.index(input_name)]
-                trusted[:, i, j] = bla.trusted[:, i, j]
-    if not np.all(np.isfinite(response[trusted])) or not trusted.any():
+                column = model[:, outputs.index(name), inputs.index(input_name)]
+                response[:, i, j] = np.where(np.isfinite(column), column, response[:, i, j])
+                trusted[:, i, j] = bla.trusted[:, i, j] & np.isfinite(column)
+    if not trusted.any():
         raise IdentificationError(f"reference {reference.structure}: no finite response at the "
                                   "trusted frequencies")
     return dataclasses.replace(bla, response=response, trusted=trusted)
@@ -714,10 +727,16 @@ def _data_driven(structure: ModelStructure, data: IdentificationData, free: Sequ
         return [], {"used": False, "why": why}, None
     try:
         bla = best_linear_approximation(data)
+        target = "the data's frequency response"
+        if reference is not None:
+            try:
+                bla = reference_response(bla, reference)
+                target = f"the frequency response of {reference.structure} fitted to the data"
+            except IdentificationError as error:  # the H1 estimate's mapping still runs
+                say(f"{structure.name}: {error}; mapping to the data's frequency response")
         candidates = initial_from_data(structure, data, free, initial=initial, bounds=bounds,
                                        bla=bla, options=options.frequency,
-                                       executor=options.starts_executor, reference=reference,
-                                       seeds=seeds)
+                                       executor=options.starts_executor, seeds=seeds)
         problem, z0, _, _ = make_problem(structure, data, free, initial, bounds)
         blind = frequency_blind(_FrequencyProblem(structure, data, problem, bla,
                                                   options.frequency.relative_floor), z0)
@@ -726,8 +745,6 @@ def _data_driven(structure: ModelStructure, data: IdentificationData, free: Sequ
         why = f"no data-driven start: {error}"
         say(f"{structure.name}: {why}")
         return [], {"used": False, "why": why}, None
-    target = "the data's frequency response" if reference is None else \
-        f"the frequency response of {reference.structure} fitted to the data"
     say(f"{structure.name}: {len(candidates)} data-driven start(s) from {target}, "
         "weighted error rms " + ", ".join(f"{c.rms:.3g}" for c in candidates))
     return candidates, {"used": True, "target": target,
