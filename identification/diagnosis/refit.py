@@ -334,17 +334,18 @@ def global_refit(structure: AugmentedStructure, train: IdentificationData, free:
     own, and perturbations of the best. A nominal fitted without a heavy sensor mass absorbs it
     far from its own parameters (seen held-out two-mass/sensor_inertia/1896: 3.9 kg, the refit
     from there and from the defaults stopped at 84.7 % where the plant's parameters give 98.6 %).
-    An actuator lag's mapping is also made without its input's columns, which only the lag bends
-    (:attr:`~panto.identification.estimation.global_fit.FrequencyFitOptions.masked_inputs`):
+    The mapping is also made without the inputs' columns only the effect bends
+    (:attr:`AugmentedStructure.bent_inputs`, an actuator lag's input;
+    :attr:`~panto.identification.estimation.global_fit.FrequencyFitOptions.masked_inputs`):
     seen held-out three-mass/actuator_lag/2120, 0.096 s on the pressure, the full mapping's best
     candidate had weighted error rms 1.28 with the lag at its 2 s bound, the plant's basin (0.72)
     found from one Sobol seed of four; without the pressure's columns from three of four."""
     budget = {**search.fit_options, "max_evaluations":
               GLOBAL_BUDGET * int(search.fit_options.get("max_evaluations", 400))}
     settings = search.options.global_fit or GlobalFitOptions()
-    if structure.effect == "actuator_lag":
+    if structure.bent_inputs:
         settings = dataclasses.replace(settings, frequency=dataclasses.replace(
-            settings.frequency, masked_inputs=(structure.effect_input,)))
+            settings.frequency, masked_inputs=structure.bent_inputs))
     result = fit_nominal(structure, free, train, global_fit=settings,
                          initial=dict(first.parameters), default=first, **budget)
     return result, _model(structure, result, free)
