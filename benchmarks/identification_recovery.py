@@ -2,7 +2,8 @@
 
 Run by hand; writes benchmarks/identification_recovery.json and .md.
 
-    .venv/bin/python benchmarks/identification_recovery.py [--quick] [--fit default global]
+    .venv/bin/python benchmarks/identification_recovery.py [--quick] [--fit default global
+        global-reference]
         [--seeds 2] [--pantograph-seeds 1] [--snr 30] [--workers 1] [--quiet]
 
 Data with known truth (``benchmarks/plants.py``): two- and three-mass oscillator plants written
@@ -20,6 +21,9 @@ is fitted with its default free parameters by each estimator asked for:
   structure's nominal values (what the diagnosis does);
 - ``global``: ``panto.identification.estimation.global_fit.fit_global`` (data-driven starts and
   perturbations), when that module exists.
+- ``global-reference``: the same, its data-driven starts matching the response of the black box
+  of the adequacy check fitted to the record first (as ``panto identify`` with ``--initial data``
+  and its adequacy check on).
 
 and once more from the truth (the "truth-started fit", the reference optimum). Recorded: the
 training fit beside the truth's own fit (the noise floor), each parameter's relative error
@@ -100,7 +104,19 @@ def fit_global_estimator(structure, data, free):
     return global_fit.fit_global(structure, data, free=free)
 
 
-ESTIMATORS = {"default": fit_default, "global": fit_global_estimator}
+def fit_global_reference(structure, data, free):
+    """``fit_global`` whose data-driven starts match the frequency response of the adequacy's
+    black box fitted to the same record (``reference``), as ``panto identify`` fits globally
+    with its adequacy check on."""
+    from panto.identification.estimation import global_fit
+    from panto.identification.structures.adequacy import best_black_box
+
+    box = best_black_box(structure, structure.nominal(), data)[0]
+    return global_fit.fit_global(structure, data, free=free, reference=box)
+
+
+ESTIMATORS = {"default": fit_default, "global": fit_global_estimator,
+              "global-reference": fit_global_reference}
 
 
 def global_fit_available() -> bool:

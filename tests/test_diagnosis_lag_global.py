@@ -6,7 +6,8 @@ mode was named (seen held-out three-mass/actuator_lag/2120, 0.096 s on the press
 that after the defaults' start still leaves the model more than 2 points below the adequacy's
 linear black box, though they lower its training cost by more than their BIC penalty (dBIC <
 0), now gets the nominal's global method, whose data-driven starts match the lagged structure's
-own frequency response to the data's."""
+own frequency response to the adequacy's black box (the data's H1 estimate before session 44,
+with the pressure's columns masked in session 43)."""
 from __future__ import annotations
 
 import numpy as np

@@ -111,9 +111,14 @@ def test_a_sensor_mass_gets_its_global_refit_where_the_black_box_does_not_valida
     express it) but validates at 60.6 % against the nominal's 72.6 %, so the validation-side
     test of missing linear dynamics gave the sensor mass no global refit and its local refits
     found nothing (``unexplained``; with the full vocabulary an extra mode at 20 Hz was named).
-    The training-side test gives it (refit.py ``lacks_linear_dynamics``): named, its mass within
-    5 %, the withheld fit within 0.2 points of the plant's own. The sensor mass alone (a shorter
-    test)."""
+    The training-side test gave it (refit.py ``lacks_linear_dynamics``). Since the nominal's
+    global fit matches the black box's response (global_fit.py ``reference_response``) the
+    nominal absorbs the mass to 0.7 training points of the black box (validation 94.6 %), no
+    shortfall calls for a second start, and the refit from the nominal gains dBIC -53 on
+    training while losing 0.74 points on the validation run: ``refit.trapped`` gives it its
+    global refit, whose mapping also polishes the nominal's candidates (``seeds``). Named, its
+    mass within 5 %, the withheld fit within 0.2 points of the plant's own. The sensor mass
+    alone (a shorter test)."""
     plants, harness = load_benchmark("effect_plants"), load_benchmark("diagnosis_families")
     case = plants.effect_case(plants.draw_spec("three-mass", "sensor_inertia", 411, quick=True))
     result = diagnose(harness.to_data(case, 0), harness.to_data(case, 1), structure="three-mass",
@@ -124,6 +129,27 @@ def test_a_sensor_mass_gets_its_global_refit_where_the_black_box_does_not_valida
     assert abs(-result.final_parameters["sensor_inertia:F_c"] - truth) < 0.05 * truth, \
         (result.final_parameters["sensor_inertia:F_c"], truth)
     assert result.fit_after["F_c"] > case.ceiling["F_c"] - 0.2, (result.summary, case.ceiling)
+
+
+def test_a_sensor_mass_refit_matched_to_the_black_box_reaches_the_plant():
+    """The seen held-out case two-mass/sensor_inertia/1386 (0.96 kg above the head, contact force
+    only, a chirp at 100 Hz, 20 s): the H1 estimate of so short a record leaks (the plant's own
+    parameters have weighted error rms 29 against it), the global refit's data-driven starts
+    matched it in another basin and the sensor mass validated at 97.0 % (0.86 kg) against the
+    plant's 97.9 % (with the full vocabulary an extra mode at 0.11 Hz won). Matched to the
+    adequacy's black box instead (rms 1.0 at the plant's parameters; global_fit.py
+    ``reference_response``): the mass within 2 %, the withheld fit within 0.1 points of the
+    plant's own. The sensor mass alone (a shorter test)."""
+    plants, harness = load_benchmark("effect_plants"), load_benchmark("diagnosis_families")
+    case = plants.effect_case(plants.draw_spec("two-mass", "sensor_inertia", 1386, quick=True))
+    result = diagnose(harness.to_data(case, 0), harness.to_data(case, 1), structure="two-mass",
+                      options=DiagnosisOptions(candidates=("sensor_inertia",),
+                                               discovery=False, challenge=False, workers=1))
+    assert result.effects[:1] == ("sensor_inertia",), result.summary
+    truth = case.plant.setting["m_s"]
+    assert abs(-result.final_parameters["sensor_inertia:F_c"] - truth) < 0.02 * truth, \
+        (result.final_parameters["sensor_inertia:F_c"], truth)
+    assert result.fit_after["F_c"] > case.ceiling["F_c"] - 0.1, (result.summary, case.ceiling)
 
 
 def test_a_sensor_mass_is_refitted_in_the_head_as_well_as_on_the_wire():

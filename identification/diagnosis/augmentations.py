@@ -375,14 +375,6 @@ class AugmentedStructure(ModelStructure):
         actuators = [a for a in self.roles.actuators if a in self.input_names]
         return (actuators or list(self.input_names))[0]
 
-    @property
-    def bent_inputs(self) -> tuple[str, ...]:
-        """The inputs whose columns of the frequency response only the effect bends, the others
-        the wrapped structure's alone (an actuator lag on one input): a global refit's mapping is
-        also made without them
-        (:attr:`~panto.identification.estimation.global_fit.FrequencyFitOptions.masked_inputs`)."""
-        return (self.effect_input,) if self.effect == "actuator_lag" else ()
-
     def _force(self) -> str:
         force = self.roles.force
         return force if force in self.output_names else str(self.setting["output"])

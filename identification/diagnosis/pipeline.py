@@ -32,7 +32,9 @@ causes it, and how far the gap shrinks once that effect is in the model.
    better than the current model (or fits the training run better by as much where its F test
    found that the structure cannot express the data), every candidate adding dynamics (lag, delay, sensor mass,
    extra mode) is refitted as well, on every input it can enter, whatever its rank, and such a
-   refit gets a second start (:func:`~panto.identification.diagnosis.refit.lacks_linear_dynamics`):
+   refit gets a second start (:func:`~panto.identification.diagnosis.refit.lacks_linear_dynamics`;
+   also, whatever the black box, where its refit is decisive on training but validates worse:
+   :func:`~panto.identification.diagnosis.refit.trapped`):
    from the structure's defaults, or by the nominal's own global method where the augmented
    structure gives its frequency response (a sensor mass on a simulated head:
    :func:`~panto.identification.diagnosis.refit.global_refit`); a passing refit is kept unless the
@@ -101,7 +103,8 @@ from panto.identification.diagnosis.challenge import (challenge, challengeable, 
 from panto.identification.diagnosis.effects import EFFECTS, SignalRoles
 from panto.identification.diagnosis.nominal import (Progress, adequacy_quietly, adequate_nominal,
                                                     black_box_validation, fit_nominal,
-                                                    fit_per_output, indented, simulate)
+                                                    fit_per_output, indented, mapping_candidates,
+                                                    simulate)
 from panto.identification.diagnosis.parallel import map_trials, resolve_workers, trial_pool
 from panto.identification.diagnosis.augmentations import INPUT_SIDE
 from panto.identification.diagnosis.ranking import RIVALS, rank_candidates
@@ -373,8 +376,10 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
         if adequacy is not None and adequacy.verdict == "cannot express" else None
     with trial_pool(resolve_workers(options.workers), executor) as pool:
         model, current, rounds, steps, accepted, left = _search(
-            model, before, candidates, Search(train, validation, roles, options, fit_options, say,
-                                              linear_level, linear_training), pool)
+            model, before, candidates, Search(
+                train, validation, roles, options, fit_options, say, linear_level,
+                linear_training, linear_reference=getattr(adequacy, "black_box", None),
+                nominal_candidates=mapping_candidates(result)), pool)
         remaining_gap = left if left is not None else (
             _gap(model, validation, current, roles) if steps else gap)
         fit_after = fit_per_output(validation, current)

@@ -119,7 +119,9 @@ def check_adequacy(structure: ModelStructure, result: IdentificationResult,
                    data: IdentificationData, *, orders: Sequence[int] | None = None,
                    floor: float = RELEVANCE_FLOOR, significance: float = SIGNIFICANCE,
                    max_evaluations: int = 100, progress: Progress | None = None,
-                   reference: Adequacy | None = None, executor: Any = None) -> Adequacy:
+                   reference: Adequacy | None = None, executor: Any = None,
+                   black_box: tuple[IdentificationResult, int, tuple[int, ...]] | None = None
+                   ) -> Adequacy:
     """Fit black boxes to `data` and judge the nominal `result` against the best of them.
 
     Parameters
@@ -144,27 +146,22 @@ def check_adequacy(structure: ModelStructure, result: IdentificationResult,
         nominal).
     executor : concurrent.futures.Executor, optional
         Fits the black boxes of the orders in parallel (the result is the serial one).
+    black_box : tuple, optional
+        :func:`best_black_box`'s result on the same data, reused (fitted before the nominal, as
+        its global fit's reference).
     """
     missing = [o for o in data.output_names if o not in result.fit]
     if missing:
         raise IdentificationError(f"adequacy: the nominal's result has no fit for {missing}")
-    n = state_order(structure, result.parameters, data)
-    orders = tuple(int(k) for k in (orders or (n, n + 2)))
-    best, best_order = None, orders[0]
     if reference is not None and reference.black_box is not None:
         best, best_order, orders = reference.black_box, reference.order, reference.orders
-    varying = _varying_inputs(data)
-    todo = orders if best is None else ()
-    boxes = list(executor.map(_black_box, [varying] * len(todo), todo,
-                              [max_evaluations] * len(todo))) \
-        if executor is not None and len(todo) > 1 else \
-        [_black_box(varying, order, max_evaluations) for order in todo]
-    for order, box in zip(todo, boxes):
-        if progress:
-            progress(f"adequacy: black box of order {order}: " + _fits(box.fit))
-        if best is None or _residual(box.fit) < _residual(best.fit):
-            best, best_order = box, order
-    assert best is not None
+    elif black_box is not None:
+        best, best_order, orders = black_box
+    else:
+        best, best_order, orders = best_black_box(structure, result.parameters, data,
+                                                  orders=orders,
+                                                  max_evaluations=max_evaluations,
+                                                  progress=progress, executor=executor)
     nominal = {o: float(result.fit[o]) for o in data.output_names}
     black_box = {o: float(best.fit[o]) for o in data.output_names}
     f_stat, p_value = _f_test(nominal, black_box, len(data), len(best.free), len(result.free))
@@ -177,14 +174,57 @@ def check_adequacy(structure: ModelStructure, result: IdentificationResult,
                     best)
 
 
+def best_black_box(structure: ModelStructure, parameters: Mapping[str, float],
+                   data: IdentificationData, *, orders: Sequence[int] | None = None,
+                   max_evaluations: int = 100, progress: Progress | None = None,
+                   executor: Any = None) -> tuple[IdentificationResult, int, tuple[int, ...]]:
+    """The black boxes of :func:`check_adequacy` fitted to `data` (orders ``n`` and ``n + 2``,
+    ``n`` the structure's states at `parameters`, unless `orders`): the best of them, its order
+    and the orders tried. Also the linear model whose frequency response a global fit's
+    data-driven starts match (``reference`` of
+    :func:`~panto.identification.estimation.global_fit.fit_global`)."""
+    n = state_order(structure, parameters, data)
+    orders = tuple(int(k) for k in (orders or (n, n + 2)))
+    varying = _varying_inputs(data)
+    boxes = list(executor.map(_black_box, [varying] * len(orders), orders,
+                              [max_evaluations] * len(orders))) \
+        if executor is not None and len(orders) > 1 else \
+        [_black_box(varying, order, max_evaluations) for order in orders]
+    best, best_order = None, orders[0]
+    for order, box in zip(orders, boxes):
+        if progress:
+            progress(f"adequacy: black box of order {order}: " + _fits(box.fit))
+        if best is None or _residual(box.fit) < _residual(best.fit):
+            best, best_order = box, order
+    assert best is not None
+    return best, best_order, orders
+
+
+def reference_for(structure: ModelStructure, parameters: Mapping[str, float],
+                  data: IdentificationData, options: Mapping[str, Any], adequacy: bool,
+                  progress: Progress | None = None
+                  ) -> tuple[IdentificationResult, int, tuple[int, ...]] | None:
+    """:func:`best_black_box` fitted before a global fit whose adequacy is checked (`adequacy`
+    and ``options["global_fit"]``): its data-driven starts then match the black box's response
+    (``reference``), and :func:`with_adequacy` reuses it; None otherwise, or where no black box
+    can be fitted (the adequacy then says why)."""
+    if not adequacy or options.get("global_fit") is None:
+        return None
+    try:
+        return best_black_box(structure, parameters, data, progress=progress)
+    except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError):
+        return None
+
+
 def with_adequacy(structure: ModelStructure, result: IdentificationResult,
-                  data: IdentificationData, *, progress: Progress | None = None
+                  data: IdentificationData, *, progress: Progress | None = None,
+                  black_box: tuple[IdentificationResult, int, tuple[int, ...]] | None = None
                   ) -> IdentificationResult:
     """`result` with its :func:`check_adequacy` in ``details["adequacy"]`` and the message.
 
     After a global fit, an adequate nominal's fit is at the optimum in cost even when fewer than
     two starts agreed (the message says so)."""
-    adequacy = check_adequacy(structure, result, data, progress=progress)
+    adequacy = check_adequacy(structure, result, data, progress=progress, black_box=black_box)
     text = f"adequacy: {adequacy.message}"
     report = result.details.get("global_fit")
     if report is not None and adequacy.verdict == "adequate" and not report["global_optimum"]:

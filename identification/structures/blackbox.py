@@ -19,7 +19,7 @@ order, found in three steps:
    ``|det| < 1``, ``|tr| < 1 + det``), so every parameter vector is a stable model. Unstable
    subspace poles are reflected into the unit circle first. Given ``A`` and ``C``, the free-run
    output is linear in ``B``, ``D`` and ``y_ref``: one linear least-squares solve.
-3. **Output-error refinement** (``refine=True``): :func:`scipy.optimize.least_squares` over all
+3. **Output-error refinement** (``refine=True``): MINPACK's Levenberg-Marquardt over all
    parameters (block parameters, ``B``, ``C``, ``D``, the output offset) on the free-run
    simulation error, residuals per output normalised as the fit metric; the refined model is
    kept only if its cost is lower, so refinement never worsens the fit.
@@ -36,10 +36,11 @@ from dataclasses import dataclass
 from typing import Any, Callable, Sequence
 
 import numpy as np
-from scipy import linalg, optimize, signal
+from scipy import linalg, signal
 
 from panto.identification.estimation.base import (IdentificationData, IdentificationError, IdentificationResult,
                                  fit_percent)
+from panto.identification.estimation.minpack import levenberg_marquardt
 
 Progress = Callable[[str], None]
 #: Default fitted outputs when present (the thesis' two objectives).
@@ -345,8 +346,9 @@ def linear_part(blocks: np.ndarray, c: np.ndarray, u: np.ndarray, y: np.ndarray,
 def refine_output_error(model: BlockModel, u: np.ndarray, y: np.ndarray, valid: np.ndarray,
                         norms: np.ndarray, *, max_evaluations: int = 100
                         ) -> tuple[BlockModel, Any]:
-    """Output-error refinement of all parameters (``scipy.optimize.least_squares``, MINPACK
-    Levenberg-Marquardt: the parameterisation is unconstrained, every vector a stable model).
+    """Output-error refinement of all parameters (MINPACK's Levenberg-Marquardt,
+    :func:`~panto.identification.estimation.minpack.levenberg_marquardt`: the parameterisation
+    is unconstrained, every vector a stable model).
 
     The Jacobian is analytic in ``B``, ``C``, ``D`` and the offset (the output is linear in
     each of them) and by forward differences in the block parameters.
@@ -375,9 +377,8 @@ def refine_output_error(model: BlockModel, u: np.ndarray, y: np.ndarray, valid: 
         columns += [_in_column(np.ones(len(u)), q, p) for q in range(p)]
         return -np.column_stack([(column / norms)[valid] for column in columns])
 
-    solution = optimize.least_squares(residuals, model.theta, jac=jacobian, method="lm",
-                                      x_scale="jac", max_nfev=max_evaluations,
-                                      xtol=1e-8, ftol=1e-8)
+    solution = levenberg_marquardt(residuals, model.theta, jac=jacobian, x_scale="jac",
+                                   max_nfev=max_evaluations, xtol=1e-8, ftol=1e-8)
     return BlockModel(*shape, solution.x), solution
 
 

@@ -9,7 +9,7 @@ The head is a one-degree-of-freedom oscillator on the cross bar. With ``Delta Y 
 and, neglecting the cross bar's motion, eq. 4.16: ``Delta Y(s) = 1/m / (s^2 + c/m s + k/m) F(s)``.
 Both are fitted here by output error in the time domain (free run of the exact first-order-hold
 discretisation, parameters ``ln m``, ``ln c``, ``ln k`` and a static offset for the weight and
-rest length, :func:`scipy.optimize.least_squares` from the best of a grid of start frequencies
+rest length, MINPACK's Levenberg-Marquardt from the best of a grid of start frequencies
 and damping ratios), with the standard deviations from the Jacobian. The non-parametric
 reference is the H1 estimate from Welch cross and auto spectra (SISO for eq. 4.16, two-input for
 eq. 4.15) with the coherence.
@@ -27,9 +27,10 @@ from dataclasses import asdict, dataclass, field
 from typing import Any, Mapping
 
 import numpy as np
-from scipy import optimize, signal
+from scipy import signal
 
 from panto.identification.estimation.base import IdentificationData, IdentificationError
+from panto.identification.estimation.minpack import levenberg_marquardt
 from panto.identification.structures.oscillators import discretise, propagate
 
 #: Frequency up to which the video position is reliable (thesis 4.3) [Hz].
@@ -132,8 +133,7 @@ def fit_head(force: np.ndarray, cross_bar: np.ndarray | None, difference: np.nda
                         math.log(k0), intercept])
               for f in (1.0, 2.0, 3.0, 5.0, 8.0, 12.0, 18.0) for zeta in (0.05, 0.2, 0.6)]
     costs = [float(np.sum(residuals(z) ** 2)) for z in starts]
-    solution = optimize.least_squares(residuals, starts[int(np.argmin(costs))], method="lm",
-                                      x_scale="jac")
+    solution = levenberg_marquardt(residuals, starts[int(np.argmin(costs))], x_scale="jac")
     m, c, k = np.exp(solution.x[:3])
     jac, r = solution.jac, solution.fun
     covariance = float(r @ r) / max(len(r) - 4, 1) * np.linalg.pinv(jac.T @ jac)

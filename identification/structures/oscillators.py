@@ -475,7 +475,9 @@ def identify_oscillator(data: IdentificationData, *, masses: int, friction: bool
         Passed to the estimator (``max_evaluations``, ``multistart``, ``rng``, ``global_fit``:
         :class:`~panto.identification.estimation.global_fit.GlobalFitOptions` for
         :func:`~panto.identification.estimation.global_fit.fit_global`, ...); ``adequacy=True``
-        adds :func:`~panto.identification.structures.adequacy.with_adequacy` (``"lm"`` only).
+        adds :func:`~panto.identification.structures.adequacy.with_adequacy` (``"lm"`` only;
+        with ``global_fit`` its black box is fitted first and the data-driven starts match its
+        response: :func:`~panto.identification.structures.adequacy.reference_for`).
     """
     outputs = tuple(outputs or [o for o in DEFAULT_OUTPUTS if o in data.output_names])
     structure = OscillatorStructure(masses, friction, outputs=outputs, hold=hold, substeps=substeps)
@@ -500,13 +502,15 @@ def identify_oscillator(data: IdentificationData, *, masses: int, friction: bool
     adequacy = bool(options.pop("adequacy", False))
     if method == "lm":
         from panto.identification.estimation.global_fit import fit_from_start
+        from panto.identification.structures.adequacy import reference_for, with_adequacy
 
+        box = reference_for(structure, {**structure.nominal(), **start}, data, options, adequacy,
+                            progress)
         result = fit_from_start(structure, data, free=free, initial=start, bounds=bounds,
-                                executor=executor, progress=progress, **options)
+                                executor=executor, progress=progress,
+                                reference=None if box is None else box[0], **options)
         if adequacy:
-            from panto.identification.structures.adequacy import with_adequacy
-
-            result = with_adequacy(structure, result, data, progress=progress)
+            result = with_adequacy(structure, result, data, progress=progress, black_box=box)
     elif method == "nsga2":
         result = _identify_pareto(structure, data, free, start, bounds, executor, progress,
                                   options)

@@ -433,13 +433,13 @@ def _identify(structure_type: type, data: IdentificationData, *, executor=None, 
     adequacy = bool(options.pop("adequacy", False))
     if method == "lm":
         from panto.identification.estimation.global_fit import fit_from_start
+        from panto.identification.structures.adequacy import reference_for, with_adequacy
 
+        box = reference_for(structure, structure.nominal(), data, options, adequacy, progress)
         result = fit_from_start(structure, data, free=free, executor=executor, progress=progress,
-                                **options)
+                                reference=None if box is None else box[0], **options)
         if adequacy:
-            from panto.identification.structures.adequacy import with_adequacy
-
-            result = with_adequacy(structure, result, data, progress=progress)
+            result = with_adequacy(structure, result, data, progress=progress, black_box=box)
         return result
     if method == "nsga2":
         return _identify_pareto(structure, data, free, executor, progress, options)
