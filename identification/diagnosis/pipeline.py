@@ -295,8 +295,8 @@ class DiagnosisOptions:
     out-of-vocabulary mechanisms of the discovery library
     (:func:`~panto.identification.diagnosis.challenge.challenger`: a play operator for hysteresis
     and backlash, kinks ``|s - c|`` for sign-blind sensors) refitted in the nominal: when the best
-    of them gains more on the withheld run than the accepted effects do on any output, the verdict
-    is ``unexplained`` with that term as the hypothesis
+    of them gains more on the withheld run than the first accepted effect does on any output (one
+    mechanism against one), the verdict is ``unexplained`` with that term as the hypothesis
     (:func:`~panto.identification.diagnosis.challenge.challenge`). Independent of :attr:`discovery`
     (which searches the whole library only after an ``unexplained`` verdict): switch both off for
     the fastest diagnosis."""
@@ -383,7 +383,8 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
         remaining_gap = left if left is not None else (
             _gap(model, validation, current, roles) if steps else gap)
         fit_after = fit_per_output(validation, current)
-        challenger = challenge(nominal_model, train, validation, fit_before, fit_after,
+        challenger = challenge(nominal_model, train, validation, fit_before,
+                               steps[0].fit_after if steps else fit_after,
                                executor, progress, pool, options.max_evaluations) \
             if options.challenge and steps and gap["significant"] and \
             remaining_gap["significant"] and comparable(steps, say) and challengeable(
