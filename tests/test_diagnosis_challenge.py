@@ -221,3 +221,25 @@ def test_one_mechanism_is_set_against_one_not_against_the_stacked_effects():
     stacked = withdrawn[-1]["fit_validation"]["F_c"] - before
     assert len(withdrawn) >= 2 and first < result.discovery["gain"] < stacked, \
         (first, result.discovery["gain"], stacked)
+
+
+def test_the_challenge_runs_where_the_effects_leave_only_noise():
+    """The seen held-out case two-mass/sign_blind_sensor/3762 (the force read as ``r + |F - r|``,
+    ramps at 50 Hz): a saturation closes the force's withheld gap to within the noise (+12.4
+    points), so a challenge run only where a significant gap remains never met it; the kink of
+    the force, the mechanism itself, gains more (+15.9). Challenged whatever gap remains: no
+    effect is named, the kink is the hypothesis."""
+    from fixtures.excitations import load_benchmark
+
+    from panto.identification.diagnosis.pipeline import DiagnosisOptions, diagnose
+
+    plants, harness = load_benchmark("effect_plants"), load_benchmark("diagnosis_families")
+    case = plants.effect_case(plants.draw_spec("two-mass", "sign_blind_sensor", 3762, quick=True))
+    result = diagnose(harness.to_data(case, 0), harness.to_data(case, 1), structure="two-mass",
+                      options=DiagnosisOptions(candidates=("saturation",), discovery=False,
+                                               workers=1))
+    withdrawn = [t for r in result.rounds for t in r["tried"] if t.get("withdrawn")]
+    assert [t["effect"] for t in withdrawn] == ["saturation"], result.summary
+    assert result.verdict == "unexplained" and result.discovery["families"][0] == "abs"
+    assert result.discovery["gain"] > withdrawn[0]["fit_validation"]["F_c"] - \
+        result.fit_before["F_c"]

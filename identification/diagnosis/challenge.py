@@ -2,8 +2,8 @@
 :func:`~panto.identification.diagnosis.pipeline.diagnose`, and the discovery after an
 ``unexplained`` verdict).
 
-:func:`challenge`: when effects were accepted and a significant gap remains, the discovery
-library's :func:`challenger` terms (a play operator: hysteresis, backlash; a kink of the output's
+:func:`challenge`: when effects were accepted (whether or not a significant gap remains), the
+discovery library's :func:`challenger` terms (a play operator: hysteresis, backlash; a kink of the output's
 own simulation: a sign-blind sensor) are refitted in the nominal; when the best gains more on the
 withheld run than the first accepted effect does on any output, they are withdrawn (:func:`withdraw`,
 :func:`yielded_summary`). :func:`discovery_hypothesis`: the whole library's best term after an
@@ -155,9 +155,9 @@ def challenge(nominal: Model, train: IdentificationData, validation: Identificat
     # validation fit leaves more than their gain
     open_outputs = [o for o in fit_before if 100.0 - fit_before[o] > gained]
     if progress:
-        progress(f"diagnose: a significant gap remains after the accepted effects (the first "
-                 f"gains +{gained:.2f} validation points at most): " + (
-                     f"challenging them with out-of-vocabulary terms on {', '.join(open_outputs)}"
+        progress(f"diagnose: the first accepted effect gains +{gained:.2f} validation points at "
+                 "most: " + (
+                     f"challenging it with out-of-vocabulary terms on {', '.join(open_outputs)}"
                      if open_outputs else "no output leaves a term room to gain more"))
     if not open_outputs:
         return None
