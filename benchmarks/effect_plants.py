@@ -501,8 +501,13 @@ def fit(measured: np.ndarray, simulated: np.ndarray) -> float:
                           / np.linalg.norm(measured - np.mean(measured))))
 
 
-def effect_case(spec: CaseSpec) -> EffectCase:
-    """Simulate `spec`'s plant on a training and a validation realisation (module notes)."""
+def effect_case(spec: CaseSpec, *, scored: bool = True) -> EffectCase:
+    """Simulate `spec`'s plant on a training and a validation realisation (module notes).
+
+    `scored` False leaves out the two runs only the benchmark's scores need (the validation run
+    without the effect, for :attr:`EffectCase.detectability`, and at half the step, for
+    :attr:`EffectCase.step_drift`; both left empty): the runs, the plant and the ceiling are the
+    same (a test that diagnoses one case needs no more; they cost 3/5 of a case's simulation)."""
     rng = np.random.default_rng([stable_hash(spec.name), 1])
     masses = 2 if spec.family == "two-mass" else 3
     truth = plants.draw_oscillator_truth(masses, rng)
@@ -520,11 +525,13 @@ def effect_case(spec: CaseSpec) -> EffectCase:
         noisy, sigma = plants.add_noise(clean, spec.snr_db, rng)
         runs.append({"time": time, "eta": eta, "p": p, "outputs": noisy, "clean": clean,
                      "noise_std": sigma})
-    runs[1]["nominal"] = runs[1]["clean"] if spec.label == "clean" else \
-        nominal.measure(nominal.simulate(time, *signals[1]), time, 1, spec.outputs)
     validation = runs[1]
     ceiling = {name: fit(validation["outputs"][name], validation["clean"][name])
                for name in spec.outputs}
+    if not scored:
+        return EffectCase(spec, plant, (runs[0], runs[1]), {}, ceiling, {})
+    runs[1]["nominal"] = runs[1]["clean"] if spec.label == "clean" else \
+        nominal.measure(nominal.simulate(time, *signals[1]), time, 1, spec.outputs)
     detectability = {name: ceiling[name] - fit(validation["outputs"][name],
                                                validation["nominal"][name])
                      for name in spec.outputs}

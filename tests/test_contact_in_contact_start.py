@@ -17,7 +17,8 @@ from panto.identification.diagnosis.pipeline import DiagnosisOptions, diagnose
 
 def _diagnosis():
     plants, harness = load_benchmark("effect_plants"), load_benchmark("diagnosis_families")
-    case = plants.effect_case(plants.draw_spec("two-mass", "contact_loss", 1598, quick=True))
+    case = plants.effect_case(plants.draw_spec("two-mass", "contact_loss", 1598, quick=True),
+                              scored=False)
     return diagnose(harness.to_data(case, 0), harness.to_data(case, 1), structure="two-mass",
                     options=DiagnosisOptions(candidates=("contact_loss",), discovery=False,
                                              challenge=False, workers=1))

@@ -207,7 +207,7 @@ def test_one_mechanism_is_set_against_one_not_against_the_stacked_effects():
 
     plants, harness = load_benchmark("effect_plants"), load_benchmark("diagnosis_families")
     case = plants.effect_case(plants.draw_spec("three-mass", "sign_blind_sensor", 3477,
-                                               quick=True))
+                                               quick=True), scored=False)
     result = diagnose(harness.to_data(case, 0), harness.to_data(case, 1),
                       structure="three-mass", options=DiagnosisOptions(
                           candidates=("saturation", "sensor_inertia"),
@@ -234,7 +234,8 @@ def test_the_challenge_runs_where_the_effects_leave_only_noise():
     from panto.identification.diagnosis.pipeline import DiagnosisOptions, diagnose
 
     plants, harness = load_benchmark("effect_plants"), load_benchmark("diagnosis_families")
-    case = plants.effect_case(plants.draw_spec("two-mass", "sign_blind_sensor", 3762, quick=True))
+    case = plants.effect_case(plants.draw_spec("two-mass", "sign_blind_sensor", 3762, quick=True),
+                              scored=False)
     result = diagnose(harness.to_data(case, 0), harness.to_data(case, 1), structure="two-mass",
                       options=DiagnosisOptions(candidates=("saturation",), discovery=False,
                                                workers=1))
@@ -258,7 +259,7 @@ def test_each_output_is_challenged_on_its_own():
 
     plants, harness = load_benchmark("effect_plants"), load_benchmark("diagnosis_families")
     case = plants.effect_case(plants.draw_spec("three-mass", "sign_blind_sensor", 3837,
-                                               quick=True))
+                                               quick=True), scored=False)
     result = diagnose(harness.to_data(case, 0), harness.to_data(case, 1),
                       structure="three-mass", options=DiagnosisOptions(
                           candidates=("extra_mode",), discovery=False,

@@ -69,7 +69,8 @@ def test_a_slow_bellow_lag_bent_into_a_mode_is_named_with_its_time_constant():
     points worse than the nominal and was rejected; the full vocabulary names the lag, with the
     mass on the head at +9.5 points second to its +10.2)."""
     plants, harness = load_benchmark("effect_plants"), load_benchmark("diagnosis_families")
-    case = plants.effect_case(plants.draw_spec("three-mass", "actuator_lag", 2120, quick=True))
+    case = plants.effect_case(plants.draw_spec("three-mass", "actuator_lag", 2120, quick=True),
+                              scored=False)
     result = diagnose(harness.to_data(case, 0), harness.to_data(case, 1),
                       structure="three-mass",
                       options=DiagnosisOptions(candidates=("actuator_lag",),

@@ -66,7 +66,8 @@ def test_a_preloaded_hardening_base_spring_is_named_with_its_cubic_coefficient()
     centre changes) within 10 % of the plant's ``k3``. The candidates that competed there only
     (the full vocabulary names the same; a shorter test)."""
     plants, harness = load_benchmark("effect_plants"), load_benchmark("diagnosis_families")
-    case = plants.effect_case(plants.draw_spec("three-mass", "cubic_stiffness", 977, quick=True))
+    case = plants.effect_case(plants.draw_spec("three-mass", "cubic_stiffness", 977, quick=True),
+                              scored=False)
     result = diagnose(harness.to_data(case, 0), harness.to_data(case, 1), structure="three-mass",
                       options=DiagnosisOptions(candidates=("cubic_stiffness", "saturation",
                                                            "dead_zone", "extra_mode"),

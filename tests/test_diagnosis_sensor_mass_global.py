@@ -93,7 +93,8 @@ def test_a_heavy_sensor_mass_is_named_with_its_mass():
     ceiling (without the global refit: ``extra_mode``, 70.1 -> 93.9 %). The two candidates that
     competed there only (the full vocabulary names the same; a shorter test)."""
     plants, harness = load_benchmark("effect_plants"), load_benchmark("diagnosis_families")
-    case = plants.effect_case(plants.draw_spec("two-mass", "sensor_inertia", 1896, quick=True))
+    case = plants.effect_case(plants.draw_spec("two-mass", "sensor_inertia", 1896, quick=True),
+                              scored=False)
     result = diagnose(harness.to_data(case, 0), harness.to_data(case, 1), structure="two-mass",
                       options=DiagnosisOptions(candidates=("sensor_inertia", "extra_mode"),
                                                discovery=False, challenge=False, workers=1))
@@ -120,7 +121,8 @@ def test_a_sensor_mass_gets_its_global_refit_where_the_black_box_does_not_valida
     mass within 5 %, the withheld fit within 0.2 points of the plant's own. The sensor mass
     alone (a shorter test)."""
     plants, harness = load_benchmark("effect_plants"), load_benchmark("diagnosis_families")
-    case = plants.effect_case(plants.draw_spec("three-mass", "sensor_inertia", 411, quick=True))
+    case = plants.effect_case(plants.draw_spec("three-mass", "sensor_inertia", 411, quick=True),
+                              scored=False)
     result = diagnose(harness.to_data(case, 0), harness.to_data(case, 1), structure="three-mass",
                       options=DiagnosisOptions(candidates=("sensor_inertia",),
                                                discovery=False, challenge=False, workers=1))
@@ -141,7 +143,8 @@ def test_a_sensor_mass_refit_matched_to_the_black_box_reaches_the_plant():
     ``reference_response``): the mass within 2 %, the withheld fit within 0.1 points of the
     plant's own. The sensor mass alone (a shorter test)."""
     plants, harness = load_benchmark("effect_plants"), load_benchmark("diagnosis_families")
-    case = plants.effect_case(plants.draw_spec("two-mass", "sensor_inertia", 1386, quick=True))
+    case = plants.effect_case(plants.draw_spec("two-mass", "sensor_inertia", 1386, quick=True),
+                              scored=False)
     result = diagnose(harness.to_data(case, 0), harness.to_data(case, 1), structure="two-mass",
                       options=DiagnosisOptions(candidates=("sensor_inertia",),
                                                discovery=False, challenge=False, workers=1))
@@ -160,7 +163,8 @@ def test_a_sensor_mass_is_refitted_in_the_head_as_well_as_on_the_wire():
     (refit.py ``try_candidate``): the head's, with its exact acceleration, reaches the lower
     training cost and is kept, named first with its mass within 2 %."""
     plants, harness = load_benchmark("effect_plants"), load_benchmark("diagnosis_families")
-    case = plants.effect_case(plants.draw_spec("two-mass", "sensor_inertia", 2106, quick=True))
+    case = plants.effect_case(plants.draw_spec("two-mass", "sensor_inertia", 2106, quick=True),
+                              scored=False)
     lines: list[str] = []
     result = diagnose(harness.to_data(case, 0), harness.to_data(case, 1), structure="two-mass",
                       options=DiagnosisOptions(candidates=("sensor_inertia", "extra_mode"),

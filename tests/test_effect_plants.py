@@ -173,6 +173,22 @@ def test_a_clean_case_costs_nothing_and_a_delay_costs_fit(ep):
     assert max(abs(v) for v in delay.step_drift.values()) < 0.01
 
 
+def test_an_unscored_case_has_the_same_runs_and_ceiling_without_the_scores(ep):
+    """``scored=False`` (the tests that diagnose one case) leaves out the runs behind the
+    detectability and the step drift only: the recorded runs, the plant and the ceiling are the
+    scored case's, bit for bit."""
+    spec = replace(ep.draw_spec("two-mass", "actuator_lag", 5, quick=True), duration=2.0,
+                   rate=50.0)
+    scored, unscored = ep.effect_case(spec), ep.effect_case(spec, scored=False)
+    assert scored.detectability and not unscored.detectability and not unscored.step_drift
+    assert unscored.ceiling == scored.ceiling and unscored.plant.setting == scored.plant.setting
+    for mine, theirs in zip(unscored.runs, scored.runs):
+        for key in ("time", "eta", "p"):
+            assert np.array_equal(mine[key], theirs[key]), key
+        for name in spec.outputs:
+            assert np.array_equal(mine["outputs"][name], theirs["outputs"][name]), name
+
+
 def test_a_head_bouncing_on_the_wire_is_not_reproducible_at_half_the_step(ep):
     """Tuning case three-mass/contact_loss/23: a head that flies a quarter of the time. Each
     impact's timing shifts the next, so the same plant integrated at half the step loses many
