@@ -268,3 +268,41 @@ def test_each_output_is_challenged_on_its_own():
     assert withdrawn[:1] == ["extra_mode"], result.summary
     assert result.verdict == "unexplained" and result.discovery["output"] == "y_cb", \
         result.discovery
+
+
+def _read_through(seed: int, reading) -> IdentificationData:
+    """The second-order plant's output (no backlash) passed through `reading`, then 1 % noise."""
+    clean = _run(seed, 0.0)
+    rng = np.random.default_rng(seed + 10)
+    y = reading(signal.lfilter(*signal.bilinear([36.0], [1.0, 3.0, 36.0], fs=RATE),
+                               clean.inputs[:, 0]))
+    y = y + 0.01 * np.std(y) * rng.normal(size=len(y))
+    return IdentificationData(clean.time, clean.inputs, y[:, None], ("u",), ("y",))
+
+
+def test_a_clip_of_the_output_is_no_challenger_and_a_fold_is():
+    """A kink of the output's own simulation ``s + theta (|s - c| - s)`` refitted with theta
+    near 1/2 flattens the output below ``c``: a clip (a head leaving the wire), which the
+    vocabulary's contact loss and saturation model, not a sensor outside it; near 1 it folds
+    the output (a sign-blind sensor). The same plant read through each, level -1: the fold is
+    the challenge's hypothesis (theta near 1), the clip's kink is refitted (theta near 1/2) and
+    not chosen."""
+    readings = {"clip": lambda y: np.maximum(y, -1.0), "fold": lambda y: -1.0 + np.abs(y + 1.0)}
+    found, lines = {}, {}
+    for name, reading in readings.items():
+        train, validation = _read_through(1, reading), _read_through(2, reading)
+        structure, free = build_structure("linear-2", train, {})
+        result = fit_nominal(structure, free, train)
+        model = Model(structure, dict(result.parameters), tuple(free), dict(result.std),
+                      np.asarray(result.covariance, float), dict(result.fit))
+        before = _nominal_fit(model, validation)
+        lines[name] = []
+        found[name] = challenge(model, train, validation, {"y": before}, {"y": before + 0.3},
+                                None, lines[name].append)
+    fold = found["fold"]
+    assert fold is not None and fold["families"][0] == "abs" and fold["coefficients"][0] > 0.75
+    assert found["clip"] is None or "abs" not in found["clip"]["families"], found["clip"]
+    refused = [line for line in lines["clip"] if "makes it a clip" in line]
+    assert refused, lines["clip"]
+    theta = float(refused[0].split("coefficient ")[1].split(" ")[0])
+    assert 0.4 < theta < 0.6, refused[0]

@@ -114,6 +114,27 @@ def test_coulomb_flow_is_exact():
     np.testing.assert_allclose(exact, sol.y[:, -1], rtol=1e-6, atol=1e-10)
 
 
+
+def test_an_overwhelming_friction_stops_the_masses_without_a_warning():
+    """A friction so far above ``v_eps / h`` that the half step's decay factor underflows to 0:
+    the flow over an infinite decay stops every velocity below ``700 v_eps`` (where it is
+    exact), and the simulation runs on without a divide-by-zero warning (seen in every run of
+    the diagnosis families) and stays finite."""
+    import warnings
+
+    v_eps = 1e-3
+    stopped = coulomb_flow(np.array([-0.5, -1e-4, 0.0, 3e-4, 0.5]), np.full(5, np.inf), v_eps)
+    np.testing.assert_allclose(stopped, 0.0, atol=1e-15)
+    t, eta, p = make_inputs(4, 2.0)
+    params = true_parameters(2, True)
+    params.update(F_f1=1e9, F_f2=1e9, v_eps=1e-6)
+    structure = OscillatorStructure(2, True, outputs=("y_cb", "xi", "F_c"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        y = structure.simulate(params, data_for(t, eta, p, np.zeros((len(t), 3)),
+                                                ("y_cb", "xi", "F_c")))
+    assert np.all(np.isfinite(y))
+
 def _friction_runs(masses, monkeypatch, switches=("1", "0")):
     """Outputs of the friction structure on stick-slip inputs, once per kernel switch."""
     t, eta, p = (v[:-2] for v in make_inputs(4, 6.0))  # without the smoothing's end effect

@@ -108,6 +108,10 @@ class DiscoveryOptions:
     admit : callable, optional
         ``admit(term, output) -> bool``: whether `term` may be added to `output` (None: every
         term of the library).
+    refuse : callable, optional
+        ``refuse(hypothesis) -> str | None``: why a refitted :class:`Hypothesis` may not be
+        chosen, or None (default: every one may); judged on its refitted coefficients, which a
+        term alone does not know.
     level_grid : int
         0: a kink ``|s - c|`` stays at the quantile it was ranked at. Else its level ``c`` is
         first chosen on a grid of this many levels across the signal's range on the training
@@ -133,6 +137,7 @@ class DiscoveryOptions:
     families: tuple[str, ...] = FAMILIES
     derivatives: bool = True
     admit: Callable[[Term, str], bool] | None = None
+    refuse: Callable[["Hypothesis"], str | None] | None = None
     level_grid: int = 0
 
     def __post_init__(self) -> None:
@@ -587,25 +592,44 @@ def discover(structure: ModelStructure, parameters: Mapping[str, float], free: S
         singles = [(h, output, i) for h, (output, i, _) in zip(found, jobs)]
     significant = [h for h in singles
                    if h[0] is not None and h[0].significant(options.significance)]
-    if not significant:
-        return None
-    best, output, i = max(significant, key=lambda h: h[0].fit_train_after - h[0].fit_train_before)
-    terms = [ranked[output][i][0]]
-    second = next((t for k, (t, _) in enumerate(ranked[output]) if k != i), None)
-    if second is not None:
-        pair = refit.run(output, [ranked[output][i][0], second])
-        if pair is not None and pair.gain > best.gain + options.second_term_gain and \
-                pair.significant(options.significance):
-            best, terms = pair, terms + [second]
-    best = refit.resume(best, terms)
-    if not best.significant(options.significance):
-        say(f"discovery: {best.term} on {best.output}: not significant at its optimum")
+    # by training gain; a later one only when the one before it, completed (second term,
+    # continuation), is refused (options.refuse: judged on the coefficients it ends with), and
+    # not the same refit again (kinks ranked at two quantiles can settle on one level)
+    tried: set[tuple[str, str]] = set()
+    for best, output, i in sorted(significant, reverse=True,
+                                  key=lambda h: h[0].fit_train_after - h[0].fit_train_before):
+        if (output, best.term) in tried:
+            continue
+        tried.add((output, best.term))
+        terms = [ranked[output][i][0]]
+        second = next((t for k, (t, _) in enumerate(ranked[output]) if k != i), None)
+        if second is not None:
+            pair = refit.run(output, [ranked[output][i][0], second])
+            if pair is not None and pair.gain > best.gain + options.second_term_gain and \
+                    pair.significant(options.significance):
+                best, terms = pair, terms + [second]
+        best = refit.resume(best, terms)
+        if not best.significant(options.significance):
+            say(f"discovery: {best.term} on {best.output}: not significant at its optimum")
+            return None
+        if _allowed(best, options, say):
+            break
+    else:
         return None
     best = replace(best, ranking=tuple((o, t.formula, round(c, 6))
                                        for o, terms in ranked.items() for t, c in terms))
     say(f"discovery: {best.term} on {best.output}: validation fit "
         f"{best.fit_validation_before:.2f} -> {best.fit_validation_after:.2f} %")
     return best if best.gain > options.min_gain else None
+
+
+def _allowed(hypothesis: Hypothesis, options: DiscoveryOptions, say: Callable[[str], None]
+             ) -> bool:
+    """Whether `hypothesis` may be chosen (``options.refuse``); says why not."""
+    why = options.refuse(hypothesis) if options.refuse is not None else None
+    if why:
+        say(f"discovery: {hypothesis.term} on {hypothesis.output}: not chosen ({why})")
+    return not why
 
 
 def _single(refit: "_Refit", job: tuple[str, Term], say: Callable[[str], None]
