@@ -464,7 +464,8 @@ class EffectCase:
     ``runs`` holds two dicts (training, validation) with ``time`` [s], ``eta`` [m], ``p`` [bar],
     ``outputs`` (noisy), ``clean`` (noise-free with the effect) and ``noise_std``; the validation
     run also ``nominal`` (noise-free, same parameters, no effect); ``detectability`` is per
-    output [fit points].
+    output [fit points]. An unscored case (``effect_case(..., scored=False)``) has no
+    ``nominal`` run and empty ``detectability`` and ``step_drift``.
     """
 
     spec: CaseSpec
@@ -486,13 +487,20 @@ class EffectCase:
         """Whether halving the integration step moves the true plant's validation fit by less
         than 2 fit points on every output (the strength threshold of the benchmark); an output
         whose fit is undefined (a head that flies for the whole run reads a constant zero) does
-        not count against it."""
+        not count against it. An unscored case (``effect_case(..., scored=False)``) raises."""
+        self._scored()
         return not any(abs(v) >= 2.0 for v in self.step_drift.values())
 
     @property
     def strongest(self) -> float:
-        """The largest detectability over the outputs [fit points]."""
+        """The largest detectability over the outputs [fit points] (an unscored case raises)."""
+        self._scored()
         return max(self.detectability.values())
+
+    def _scored(self) -> None:
+        if not self.detectability or not self.step_drift:
+            raise ValueError(f"{self.spec.name}: an unscored case (effect_case(..., "
+                             "scored=False)) has no detectability and no step drift")
 
 
 def fit(measured: np.ndarray, simulated: np.ndarray) -> float:

@@ -306,3 +306,23 @@ def test_a_clip_of_the_output_is_no_challenger_and_a_fold_is():
     assert refused, lines["clip"]
     theta = float(refused[0].split("coefficient ")[1].split(" ")[0])
     assert 0.4 < theta < 0.6, refused[0]
+
+
+def test_a_clip_is_read_from_the_slope_below_every_kink():
+    """``a_clip`` on refitted hypotheses as the challenge gives them (kinks of the output's own
+    simulation): the slope below the kinks ``1 - 2 sum(theta)`` between -1/2 and 1/2 is a clip;
+    a fold (slope -1), a straight line and a play's coefficient are not."""
+    from types import SimpleNamespace
+
+    from panto.identification.diagnosis.challenge import a_clip
+
+    def made(*terms):
+        return SimpleNamespace(families=tuple(f for f, _ in terms),
+                               coefficients=tuple(c for _, c in terms))
+
+    assert a_clip(made(("abs", 0.5))) and a_clip(made(("abs", 0.3)))
+    assert a_clip(made(("abs", 0.49), ("play", 1.0)))  # the play's coefficient is not a slope
+    assert a_clip(made(("abs", 0.9), ("abs", -0.4)))  # together: flat below both kinks
+    assert not a_clip(made(("abs", 1.0))) and not a_clip(made(("abs", 0.1)))
+    assert not a_clip(made(("abs", 0.5), ("abs", 0.5)))  # together: a fold below both
+    assert not a_clip(made(("play", 0.5))) and not a_clip(made())

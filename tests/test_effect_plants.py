@@ -182,11 +182,17 @@ def test_an_unscored_case_has_the_same_runs_and_ceiling_without_the_scores(ep):
     scored, unscored = ep.effect_case(spec), ep.effect_case(spec, scored=False)
     assert scored.detectability and not unscored.detectability and not unscored.step_drift
     assert unscored.ceiling == scored.ceiling and unscored.plant.setting == scored.plant.setting
+    assert unscored.plant.truth == scored.plant.truth
     for mine, theirs in zip(unscored.runs, scored.runs):
-        for key in ("time", "eta", "p"):
+        for key in ("time", "eta", "p", "noise_std"):
             assert np.array_equal(mine[key], theirs[key]), key
         for name in spec.outputs:
-            assert np.array_equal(mine["outputs"][name], theirs["outputs"][name]), name
+            for key in ("outputs", "clean"):
+                assert np.array_equal(mine[key][name], theirs[key][name]), (key, name)
+    with pytest.raises(ValueError, match="unscored"):
+        unscored.strongest
+    with pytest.raises(ValueError, match="unscored"):
+        unscored.reproducible
 
 
 def test_a_head_bouncing_on_the_wire_is_not_reproducible_at_half_the_step(ep):

@@ -114,7 +114,6 @@ def test_coulomb_flow_is_exact():
     np.testing.assert_allclose(exact, sol.y[:, -1], rtol=1e-6, atol=1e-10)
 
 
-
 def test_an_overwhelming_friction_stops_the_masses_without_a_warning():
     """A friction so far above ``v_eps / h`` that the half step's decay factor underflows to 0:
     the flow over an infinite decay stops every velocity below ``700 v_eps`` (where it is
@@ -134,6 +133,7 @@ def test_an_overwhelming_friction_stops_the_masses_without_a_warning():
         y = structure.simulate(params, data_for(t, eta, p, np.zeros((len(t), 3)),
                                                 ("y_cb", "xi", "F_c")))
     assert np.all(np.isfinite(y))
+
 
 def _friction_runs(masses, monkeypatch, switches=("1", "0")):
     """Outputs of the friction structure on stick-slip inputs, once per kernel switch."""

@@ -79,21 +79,25 @@ def challenger(term: Any, output: str) -> bool:
 
 
 def a_clip(hypothesis: Any) -> str | None:
-    """Why a refitted challenger is no evidence outside the vocabulary: one of its kinks is a
-    clip. A kink of the output's own simulation ``s + theta (|s - c| - s)`` keeps the slope 1
-    above ``c`` and has ``1 - 2 theta`` below it: ``theta = 1`` folds the output (a sign-blind
-    sensor, outside the vocabulary), ``theta = 1/2`` flattens it (a lower clip: a head leaving
-    the wire, a sensor's range, which the vocabulary's contact loss and saturation model with
-    their dynamics), ``theta = 0`` leaves it straight. A kink whose slope below lies nearer the
-    clip's 0 than the fold's -1 or the line's 1 (``1/4 < theta < 3/4``) is a clip (seen
+    """Why a refitted challenger is no evidence outside the vocabulary: its kinks make a clip.
+    A kink of the output's own simulation ``s + theta (|s - c| - s)`` (the only kinks
+    :func:`challenger` admits) keeps the slope 1 above ``c`` and has ``1 - 2 theta`` below it:
+    ``theta = 1`` folds the output (a sign-blind sensor, outside the vocabulary), ``theta = 1/2``
+    flattens it (a lower clip: a head leaving the wire, a sensor's range, which the vocabulary's
+    contact loss and saturation model with their dynamics), ``theta = 0`` leaves it straight.
+    With two kinks the slope below both is ``1 - 2 (theta_1 + theta_2)``. A slope there nearer
+    the clip's 0 than the fold's -1 or the line's 1 (between -1/2 and 1/2) is a clip (seen
     held-out two-mass/contact_loss/3788 and three-mass/contact_loss/4103, flying heads: ``theta``
     0.51 and 0.49 on the force; the sign-blind sensors 3477 and 3762: 0.89 and 0.95). None when
-    no kink is a clip."""
-    for family, theta in zip(hypothesis.families, hypothesis.coefficients):
-        if family == "abs" and 0.25 < theta < 0.75:
-            return (f"the kink's coefficient {theta:.2f} makes it a clip of the output (slope "
-                    f"{1.0 - 2.0 * theta:.2f} below the kink): a contact loss or a saturation, "
-                    "which the vocabulary models, not a sign-blind sensor")
+    the kinks make no clip (or there is none)."""
+    thetas = [t for family, t in zip(hypothesis.families, hypothesis.coefficients)
+              if family == "abs"]
+    slope = 1.0 - 2.0 * sum(thetas)
+    if thetas and -0.5 < slope < 0.5:
+        return (f"the kink's coefficient{'s' if len(thetas) > 1 else ''} "
+                f"{' + '.join(f'{t:.2f}' for t in thetas)} make{'' if len(thetas) > 1 else 's'} "
+                f"it a clip of the output (slope {slope:.2f} below the kink): a contact loss or "
+                "a saturation, which the vocabulary models, not a sign-blind sensor")
     return None
 
 
@@ -229,5 +233,5 @@ def hypothesis_text(report: Mapping[str, Any]) -> str:
     return f"{report.get('term', '?')} on {report.get('output', '?')}{fits}{share}"
 
 
-__all__ = ["CHALLENGERS", "CHALLENGE", "a_clip", "challenger", "challenge", "challengeable", "comparable",
-           "discovery_hypothesis", "hypothesis_text", "withdraw", "yielded_summary"]
+__all__ = ["CHALLENGERS", "CHALLENGE", "a_clip", "challenger", "challenge", "challengeable",
+           "comparable", "discovery_hypothesis", "hypothesis_text", "withdraw", "yielded_summary"]

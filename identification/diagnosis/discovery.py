@@ -34,7 +34,9 @@ the training run:
    fit among those whose coefficient is significant (:attr:`DiscoveryOptions.significance`) is
    kept; the next-ranked term is added when it raises the validation fit by more than
    :attr:`DiscoveryOptions.second_term_gain` points (that choice looks at the validation run, so
-   the gain of a two-term hypothesis is slightly optimistic).
+   the gain of a two-term hypothesis is slightly optimistic). When the completed hypothesis is
+   refused (:attr:`DiscoveryOptions.refuse`, on its refitted coefficients), the next single by
+   training fit is completed instead (serially, outside the pool).
 5. **Judged on the withheld run**: fit [%] of the output before and after, the gain in fit points
    and the share of the validation gap it closes, ``1 - ((100 - after) / (100 - before))^2`` (the
    share of the residual energy removed). No hypothesis when the gain is not above
@@ -560,7 +562,9 @@ def discover(structure: ModelStructure, parameters: Mapping[str, float], free: S
     Returns
     -------
     Hypothesis or None
-        None when no term raises the validation fit by more than ``options.min_gain``.
+        None when no term's coefficient is significant, the chosen one's is not at its optimum,
+        every candidate is refused (``options.refuse``), or the hypothesis does not raise the
+        validation fit by more than ``options.min_gain``.
     """
     parameters, names = dict(parameters), structure.output_names
     say = progress or (lambda _: None)
@@ -594,13 +598,15 @@ def discover(structure: ModelStructure, parameters: Mapping[str, float], free: S
                    if h[0] is not None and h[0].significant(options.significance)]
     # by training gain; a later one only when the one before it, completed (second term,
     # continuation), is refused (options.refuse: judged on the coefficients it ends with), and
-    # not the same refit again (kinks ranked at two quantiles can settle on one level)
-    tried: set[tuple[str, str]] = set()
+    # not a refit that ended where an earlier one did (kinks ranked at two quantiles can settle
+    # on one level)
+    tried: set[tuple[str, tuple]] = set()
     for best, output, i in sorted(significant, reverse=True,
                                   key=lambda h: h[0].fit_train_after - h[0].fit_train_before):
-        if (output, best.term) in tried:
+        ended = (output, tuple(sorted(best.parameters.items())))
+        if ended in tried:
             continue
-        tried.add((output, best.term))
+        tried.add(ended)
         terms = [ranked[output][i][0]]
         second = next((t for k, (t, _) in enumerate(ranked[output]) if k != i), None)
         if second is not None:
@@ -609,11 +615,12 @@ def discover(structure: ModelStructure, parameters: Mapping[str, float], free: S
                     pair.significant(options.significance):
                 best, terms = pair, terms + [second]
         best = refit.resume(best, terms)
+        if not _allowed(best, options, say):
+            continue
         if not best.significant(options.significance):
             say(f"discovery: {best.term} on {best.output}: not significant at its optimum")
             return None
-        if _allowed(best, options, say):
-            break
+        break
     else:
         return None
     best = replace(best, ranking=tuple((o, t.formula, round(c, 6))
