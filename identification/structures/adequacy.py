@@ -233,6 +233,24 @@ def with_adequacy(structure: ModelStructure, result: IdentificationResult,
                                details={**result.details, "adequacy": adequacy.to_dict()})
 
 
+def fit_checked(structure: ModelStructure, data: IdentificationData,
+                parameters: Mapping[str, float], adequacy: bool, *,
+                progress: Progress | None = None, **fit: Any) -> IdentificationResult:
+    """:func:`~panto.identification.estimation.global_fit.fit_from_start` of `structure` on
+    `data` with the options `fit`, and, when `adequacy`, the black box fitted first
+    (:func:`reference_for` at `parameters`, the start's values: the global fit's data-driven
+    starts match its response) and reused by :func:`with_adequacy`: the least-squares path of
+    every structure's ``identify``."""
+    from panto.identification.estimation.global_fit import fit_from_start
+
+    box = reference_for(structure, parameters, data, fit, adequacy, progress)
+    result = fit_from_start(structure, data, progress=progress,
+                            reference=None if box is None else box[0], **fit)
+    if adequacy:
+        result = with_adequacy(structure, result, data, progress=progress, black_box=box)
+    return result
+
+
 def _black_box(data: IdentificationData, order: int, max_evaluations: int
                ) -> IdentificationResult:
     """The black box of `order` states fitted to `data` (an executor's task)."""
@@ -291,4 +309,4 @@ def _plain(value: float) -> float | None:
     return float(value) if math.isfinite(value) else None
 
 
-__all__ = ["Adequacy", "check_adequacy", "with_adequacy", "state_order", "RELEVANCE_FLOOR", "SIGNIFICANCE"]
+__all__ = ["Adequacy", "check_adequacy", "fit_checked", "with_adequacy", "state_order", "RELEVANCE_FLOOR", "SIGNIFICANCE"]

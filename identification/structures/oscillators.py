@@ -503,16 +503,11 @@ def identify_oscillator(data: IdentificationData, *, masses: int, friction: bool
         bounds[name] = (min(low, start[name]), max(high, start[name]))
     adequacy = bool(options.pop("adequacy", False))
     if method == "lm":
-        from panto.identification.estimation.global_fit import fit_from_start
-        from panto.identification.structures.adequacy import reference_for, with_adequacy
+        from panto.identification.structures.adequacy import fit_checked
 
-        box = reference_for(structure, {**structure.nominal(), **start}, data, options, adequacy,
-                            progress)
-        result = fit_from_start(structure, data, free=free, initial=start, bounds=bounds,
-                                executor=executor, progress=progress,
-                                reference=None if box is None else box[0], **options)
-        if adequacy:
-            result = with_adequacy(structure, result, data, progress=progress, black_box=box)
+        result = fit_checked(structure, data, {**structure.nominal(), **start}, adequacy,
+                             progress=progress, free=free, initial=start, bounds=bounds,
+                             executor=executor, **options)
     elif method == "nsga2":
         result = _identify_pareto(structure, data, free, start, bounds, executor, progress,
                                   options)

@@ -432,15 +432,10 @@ def _identify(structure_type: type, data: IdentificationData, *, executor=None, 
     data = data.select_outputs(outputs)
     adequacy = bool(options.pop("adequacy", False))
     if method == "lm":
-        from panto.identification.estimation.global_fit import fit_from_start
-        from panto.identification.structures.adequacy import reference_for, with_adequacy
+        from panto.identification.structures.adequacy import fit_checked
 
-        box = reference_for(structure, structure.nominal(), data, options, adequacy, progress)
-        result = fit_from_start(structure, data, free=free, executor=executor, progress=progress,
-                                reference=None if box is None else box[0], **options)
-        if adequacy:
-            result = with_adequacy(structure, result, data, progress=progress, black_box=box)
-        return result
+        return fit_checked(structure, data, structure.nominal(), adequacy, progress=progress,
+                           free=free, executor=executor, **options)
     if method == "nsga2":
         return _identify_pareto(structure, data, free, executor, progress, options)
     raise IdentificationError(f"unknown method {method!r}: 'lm' or 'nsga2'")
