@@ -385,8 +385,7 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
         remaining_gap = left if left is not None else (
             _gap(model, validation, current, roles) if steps else gap)
         fit_after = fit_per_output(validation, current)
-        challenger = challenge(nominal_model, train, validation, fit_before,
-                               steps[0].fit_after if steps else fit_after,
+        challenger = challenge(nominal_model, train, validation, fit_before, steps[0].fit_after,
                                executor, progress, pool, options.max_evaluations) \
             if options.challenge and steps and comparable(steps, say) and challengeable(
                 adequacy or adequacy_quietly(nominal, result, train), say) else None
