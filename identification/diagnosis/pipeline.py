@@ -68,6 +68,12 @@ causes it, and how far the gap shrinks once that effect is in the model.
    runs* (a sensor re-zeroed, a preload moved between them; the training run cannot show it):
    measured on the withheld run's first fold, judged on the others by the same validation tests
    and ``|d| / sigma_d > 3`` (:mod:`~panto.identification.diagnosis.run_offset`).
+   When two or more effects were accepted, each is then removed in turn and the rest refitted
+   (from the final model's values); an effect whose removal the withheld run does not notice
+   (the same withheld tests, the full model against the model without it) is dropped, the
+   cheapest first, and the kept effects' steps are judged again in order
+   (:mod:`~panto.identification.diagnosis.backward`; :attr:`DiagnosisOptions.backward`): an
+   extra mode that imitated a large lag in round 1 goes once the lag is accepted in round 2.
 4. **How far.** Per accepted effect: the validation fit before and after per output, residual
    energy per band and segment before and after, the share of residual energy removed, and the
    effect's parameters with their standard deviations.
@@ -113,7 +119,7 @@ from panto.identification.diagnosis.refit import (ADDS_DYNAMICS, LINEAR_SHORTFAL
 from panto.identification.diagnosis.residual_analysis import (ErrorModelOptions, OutputAnalysis,
                                                              analyse_residuals)
 from panto.identification.diagnosis.residual_energy import jsonable
-from panto.identification.diagnosis import choice, run_offset
+from panto.identification.diagnosis import backward, choice, run_offset
 from panto.identification.diagnosis.support import (NO_GAIN_REASONS, build_structure,
                                                     default_roles, drift_test, effective_samples,
                                                     gap_significance, retuning, settling_time,
@@ -302,6 +308,11 @@ class DiagnosisOptions:
     the fastest diagnosis. Run whether or not a significant gap remains after the effects (since
     session 45): seen held-out two-mass/sign_blind_sensor/3762, a saturation closed the force's
     gap to within the noise (+12.35 points) where the kink ``|F_c - 28| - F_c`` gains +15.93."""
+    backward: bool = True
+    """Once two or more effects are accepted, remove each in turn, refit the rest and drop an
+    effect the withheld run does not need beside the others (by the forward search's own withheld
+    tests; :mod:`~panto.identification.diagnosis.backward`): an extra mode imitating a large lag
+    in round 1 is superfluous once the lag is accepted in round 2."""
     workers: int | None = None
     """Worker processes for a round's candidate refits (:mod:`~panto.identification.diagnosis.
     parallel`; the verdict is the serial one): by default the CPUs available (one inside a
@@ -372,16 +383,31 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
     if "global_fit" in result.details:
         say("diagnose: nominal " + result.details["global_fit"]["verdict"])
     before, analysis_before, gap, fit_before = _where(model, validation, roles, say)
-    nominal_model = model
+    nominal_model, dropped = model, []
     linear_level = black_box_validation(adequacy, validation)
     linear_training = dict(adequacy.black_box_fit) \
         if adequacy is not None and adequacy.verdict == "cannot express" else None
+    search = Search(train, validation, roles, options, fit_options, say, linear_level,
+                    linear_training, linear_reference=getattr(adequacy, "black_box", None),
+                    nominal_candidates=mapping_candidates(result))
     with trial_pool(resolve_workers(options.workers), executor) as pool:
-        model, current, rounds, steps, accepted, left = _search(
-            model, before, candidates, Search(
-                train, validation, roles, options, fit_options, say, linear_level,
-                linear_training, linear_reference=getattr(adequacy, "black_box", None),
-                nominal_candidates=mapping_candidates(result)), pool)
+        model, current, rounds, steps, accepted, left, chosen = _search(
+            model, before, candidates, search, pool)
+        if options.backward and len(accepted) >= 2 and not any(s.evidence for s in steps) \
+                and not any(t.variant == run_offset.VARIANT for t in chosen):
+            eliminated = backward.eliminate(nominal_model, model, current, accepted, search, pool)
+            if eliminated is not None:
+                model, current, left = eliminated["model"], eliminated["simulated"], None
+                steps = [dataclasses.replace(_step(trial, validation, run_before, run_after),
+                                             alternatives=steps[index].alternatives)
+                         for index, (trial, run_before, run_after) in zip(
+                             eliminated["kept"], backward.rejudged(
+                                 nominal_model, before, eliminated, chosen, search))]
+                accepted = [accepted[index] for index in eliminated["kept"]]
+                dropped = eliminated["dropped"]
+                for item in dropped:
+                    rounds = withdraw(rounds, [None] * item["index"] + [item["effect"]],
+                                      backward.why_dropped(item))
         remaining_gap = left if left is not None else (
             _gap(model, validation, current, roles) if steps else gap)
         fit_after = fit_per_output(validation, current)
@@ -389,16 +415,21 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
                                executor, progress, pool, options.max_evaluations) \
             if options.challenge and steps and comparable(steps, say) and challengeable(
                 adequacy or adequacy_quietly(nominal, result, train), say) else None
-    withdrawn = accepted if challenger is not None else []
+    withdrawn = list(accepted) if challenger is not None else []
     if challenger is not None:  # the accepted effects yield to an out-of-vocabulary term
+        dropped_rounds = {item["index"] for item in dropped}
+        in_rounds = [None if index in dropped_rounds else withdrawn.pop(0)
+                     for index in range(len(withdrawn) + len(dropped))]
+        withdrawn = [effect for effect in in_rounds if effect is not None]
         model, current, steps, accepted, remaining_gap = nominal_model, before, [], [], gap
         fit_after = fit_per_output(validation, current)
-        rounds = withdraw(rounds, withdrawn, challenger["yielded"])
+        rounds = withdraw(rounds, in_rounds, challenger["yielded"])
     analysis_after = _analyse(validation, current, model, roles) if steps else analysis_before
     verdict = "effect" if steps else ("unexplained" if gap["significant"] else "none")
     where = where_summary(analysis_before, validation)
     summary = (_summary(verdict, accepted, fit_before, fit_after, where, remaining_gap, gap)
                if challenger is None else yielded_summary(withdrawn, challenger, where)) + \
+        backward.dropped_text(dropped) + \
         "".join(f"; {s.effect} passed on the {s.evidence}, not on the fit sample by sample (the "
                 "free run of a head that leaves the wire may not be reproducible)"
                 for s in steps if s.evidence) + \
@@ -468,12 +499,12 @@ def _search(model: Model, before: np.ndarray, candidates: Sequence[str], search:
     leave is within the noise (:func:`_gap` on the validation run: nothing left to name; module
     notes, step 3); a round's refits on `pool`
     (:func:`~panto.identification.diagnosis.parallel.map_trials`). Returns the model, its free run
-    on the validation run, the rounds, steps and accepted effects, and the gap left by the last
-    accepted effect when it was tested (else None)."""
+    on the validation run, the rounds, steps and accepted effects, the gap left by the last
+    accepted effect when it was tested (else None), and the accepted trials."""
     train, validation, roles, options = search.train, search.validation, search.roles, \
         search.options
     say = search.say
-    rounds, steps, accepted = [], [], []
+    rounds, steps, accepted, chosen_trials = [], [], [], []
     current, left = before, None
     for round_index in range(options.max_effects):
         if steps:
@@ -514,6 +545,7 @@ def _search(model: Model, before: np.ndarray, candidates: Sequence[str], search:
         steps.append(dataclasses.replace(_step(trial, validation, current, simulated),
                                          alternatives=alternatives))
         accepted.append(trial.effect)
+        chosen_trials.append(trial)
         say(f"diagnose: accepted {trial.effect}: validation fit " + _fits(trial.fit_validation)
             + (f"; the data support {', '.join(alternatives)} as well" if alternatives else ""))
         if trial.variant == run_offset.VARIANT:  # a property of the withheld run: kept for
@@ -526,7 +558,7 @@ def _search(model: Model, before: np.ndarray, candidates: Sequence[str], search:
             say("diagnose: stop: the next candidates' withheld gains would be measured against "
                 "a free run that does not follow the record sample by sample")
             break
-    return model, current, rounds, steps, accepted, left
+    return model, current, rounds, steps, accepted, left, chosen_trials
 
 
 def _named(candidate: Mapping[str, Any]) -> str:

@@ -281,21 +281,14 @@ def judge_trial(candidate: Mapping[str, Any], refit: Refit, model: Any,
     significance = _significance(effect, structure, own, std, _covariance(result, inflation))
     gain = withheld_gain(validation, current, refit.simulated, folds)
     fit_after, improvement = gain["fit_after"], gain["improvement"]
-    per_fold, spread, standard_error = gain["per_fold"], gain["spread"], gain["standard_error"]
+    per_fold, spread = gain["per_fold"], gain["spread"]
     failed = gain["failed"]
     threshold = BIC_THRESHOLD if p else SWITCH_BIC
     if not delta_bic < threshold:
         failed.append(f"dBIC {delta_bic:.1f} >= {threshold:g}")
     if not significance > SIGNIFICANCE:
         failed.append(f"|theta|/sigma {significance:.2f} <= {SIGNIFICANCE:g}")
-    if not gain["best"] >= IMPROVEMENT_FLOOR:
-        failed.append(f"{NO_GAIN_REASONS[0]} by {IMPROVEMENT_FLOOR:g} points "
-                      f"(best {gain['best']:.2f})")
-    local = withheld_t(validation, current, refit.simulated)
-    if not (improvement > 0 and (improvement > standard_error or max(local.values()) > LOCAL_T)):
-        failed.append(f"{NO_GAIN_REASONS[1]} {improvement:.2f} not above the folds' standard "
-                      f"error {standard_error:.2f}, and its change explains the withheld "
-                      f"residual with t = {max(local.values()):.1f} <= {LOCAL_T:g}")
+    failed += no_withheld_gain(gain, validation, current, refit.simulated)
     evidence = ""
     force = _force_output(structure, validation)
     if effect == "contact_loss" and failed and force is not None and all(
@@ -334,6 +327,26 @@ def withheld_gain(validation: IdentificationData, current: np.ndarray, simulated
             "per_fold": per_fold, "spread": spread,
             "standard_error": spread / math.sqrt(len(per_fold)),
             "failed": worsened(fit_before, fit_after, per_output)}
+
+
+def no_withheld_gain(gain: Mapping[str, Any], validation: IdentificationData,
+                     current: np.ndarray, simulated: np.ndarray) -> list[str]:
+    """Why the change from `current` to `simulated` (free runs on the validation run; `gain`
+    their :func:`withheld_gain`) is no gain on the withheld run: no output improves by
+    :data:`IMPROVEMENT_FLOOR`, or the mean improvement is neither above the folds' standard error
+    nor a regressor of the withheld residual with ``t > LOCAL_T`` (:func:`withheld_t`); empty
+    when it is one."""
+    failed, improvement = [], gain["improvement"]
+    if not gain["best"] >= IMPROVEMENT_FLOOR:
+        failed.append(f"{NO_GAIN_REASONS[0]} by {IMPROVEMENT_FLOOR:g} points "
+                      f"(best {gain['best']:.2f})")
+    local = withheld_t(validation, current, simulated)
+    if not (improvement > 0 and (improvement > gain["standard_error"] or
+                                 max(local.values()) > LOCAL_T)):
+        failed.append(f"{NO_GAIN_REASONS[1]} {improvement:.2f} not above the folds' standard "
+                      f"error {gain['standard_error']:.2f}, and its change explains the withheld "
+                      f"residual with t = {max(local.values()):.1f} <= {LOCAL_T:g}")
+    return failed
 
 
 def withheld_t(validation: IdentificationData, current: np.ndarray,
