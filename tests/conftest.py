@@ -12,6 +12,12 @@ from pathlib import Path
 
 import pytest
 
+if os.environ.get("PYTEST_XDIST_WORKER") is not None:
+    # each xdist worker already takes one core: a diagnosis' default process pool of every CPU
+    # (panto.identification.diagnosis.parallel.resolve_workers) would oversubscribe them; tests
+    # that ask for workers explicitly still get their pool
+    os.environ.setdefault("PANTO_WORKERS", "1")
+
 
 def _shared_folder(tmp_path_factory: pytest.TempPathFactory, name: str) -> Path:
     """A folder shared by every xdist worker of this run, or this session's own without xdist."""

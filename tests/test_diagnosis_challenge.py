@@ -211,7 +211,7 @@ def test_one_mechanism_is_set_against_one_not_against_the_stacked_effects():
     result = diagnose(harness.to_data(case, 0), harness.to_data(case, 1),
                       structure="three-mass", options=DiagnosisOptions(
                           candidates=("saturation", "sensor_inertia"),
-                          discovery=False, workers=2))
+                          discovery=False, workers=1))
     assert result.verdict == "unexplained" and result.effects == (), result.summary
     assert result.discovery["families"][0] == "abs", result.discovery
     withdrawn = [t for r in result.rounds for t in r["tried"] if t.get("withdrawn")]
@@ -263,7 +263,7 @@ def test_each_output_is_challenged_on_its_own():
     result = diagnose(harness.to_data(case, 0), harness.to_data(case, 1),
                       structure="three-mass", options=DiagnosisOptions(
                           candidates=("extra_mode",), discovery=False,
-                          workers=2))
+                          workers=1))
     withdrawn = [t["effect"] for r in result.rounds for t in r["tried"] if t.get("withdrawn")]
     assert withdrawn[:1] == ["extra_mode"], result.summary
     assert result.verdict == "unexplained" and result.discovery["output"] == "y_cb", \

@@ -87,8 +87,9 @@ def test_map_trials_keeps_the_order_and_replays_each_task_s_lines():
     assert lines == ["3 first", "3 second", "1 first", "1 second", "2 first", "2 second"]
 
 
-def test_workers_run_one_blas_thread_and_nest_no_pool():
+def test_workers_run_one_blas_thread_and_nest_no_pool(monkeypatch):
     pytest.importorskip("threadpoolctl")
+    monkeypatch.delenv(parallel.WORKERS_VARIABLE, raising=False)
     with ProcessPoolExecutor(1, initializer=parallel.limit_threads) as pool:
         threads = pool.submit(_blas_threads).result()
         nested = pool.submit(parallel.resolve_workers, None).result()
@@ -96,6 +97,18 @@ def test_workers_run_one_blas_thread_and_nest_no_pool():
     assert nested == 1  # inside a worker process the search stays in-process
     assert parallel.resolve_workers(None) == parallel.available_cpus()
     assert parallel.resolve_workers(3) == 3
+
+
+def test_the_environment_caps_the_default_workers_and_a_bad_value_is_named(monkeypatch):
+    monkeypatch.setenv(parallel.WORKERS_VARIABLE, "1")
+    assert parallel.resolve_workers(None) == 1
+    assert parallel.resolve_workers(2) == 2  # an explicit request is not capped
+    monkeypatch.setenv(parallel.WORKERS_VARIABLE, "64")
+    assert parallel.resolve_workers(None) == parallel.available_cpus()
+    for bad in ("two", "0", "-1"):
+        monkeypatch.setenv(parallel.WORKERS_VARIABLE, bad)
+        with pytest.raises(ValueError, match=f"PANTO_WORKERS={bad!r}.*at least 1"):
+            parallel.resolve_workers(None)
 
 
 def test_workers_below_one_are_refused():

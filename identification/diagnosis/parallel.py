@@ -37,15 +37,26 @@ def available_cpus() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+#: Environment variable capping the default number of worker processes (a machine shared with
+#: other jobs; a test runner whose processes already take one core each sets it to 1).
+WORKERS_VARIABLE = "PANTO_WORKERS"
+
+
 def resolve_workers(requested: int | None) -> int:
-    """Worker processes for the refits: `requested`, or by default the CPUs available, but one
-    inside a worker process (whose parent already spreads its work over the cores) or a daemon
-    process (which may not start children)."""
+    """Worker processes for the refits: `requested`, or by default the CPUs available (at most
+    :data:`WORKERS_VARIABLE` where set), but one inside a worker process (whose parent already
+    spreads its work over the cores) or a daemon process (which may not start children)."""
     if requested is not None:
         return max(1, int(requested))
     if multiprocessing.parent_process() is not None or multiprocessing.current_process().daemon:
         return 1
-    return available_cpus()
+    cap = os.environ.get(WORKERS_VARIABLE, "").strip()
+    if not cap:
+        return available_cpus()
+    if not cap.isdigit() or int(cap) < 1:
+        raise ValueError(f"environment variable {WORKERS_VARIABLE}={cap!r}: expected a whole "
+                         "number of worker processes, at least 1")
+    return min(available_cpus(), int(cap))
 
 
 def limit_threads() -> None:
@@ -138,5 +149,5 @@ def _recorded(task: Callable, item: Any) -> tuple[Any, list[str]]:
     return task(item, lines.append), lines
 
 
-__all__ = ["available_cpus", "resolve_workers", "limit_threads", "trial_pool", "map_trials",
+__all__ = ["WORKERS_VARIABLE", "available_cpus", "resolve_workers", "limit_threads", "trial_pool", "map_trials",
            "map_replayed", "THREAD_VARIABLES"]
