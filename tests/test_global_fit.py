@@ -514,3 +514,33 @@ def test_seeds_are_polished_beside_the_screening_and_a_seed_outside_a_log_domain
     bad = global_fit.initial_from_data(structure, data, free, options=options,
                                        seeds=[{"m1": -1.0}])
     assert [c.cost for c in bad] == [c.cost for c in plain]
+
+
+def test_a_parameter_bounded_by_zero_is_screened_log_uniformly_and_the_others_as_before():
+    """The frequency mapping's screening (global_fit._screened): an actuator lag's time constant,
+    bounds (0, 100 T0) on the fits' linear scale, was screened uniformly there, one point in a
+    hundred below its start; it is screened log-uniformly from SCREEN_FLOOR T0 to its upper bound
+    (three of the five decades below 100 T0 lie below T0). A positive parameter (a log scale in
+    the fits) and a two-sided one keep the uniform screening in their transformed bounds."""
+    from types import SimpleNamespace
+
+    from scipy.stats import qmc
+
+    start = 0.05
+    problem = SimpleNamespace(reference=np.array([start, 2.0, 1.0]),
+                              scale=np.array([start, 2.0, 1.0]),
+                              logarithmic=np.array([False, True, False]))
+    lo = np.array([-1.0, math.log(0.1), -11.0])   # lag [0, 5]; mass [0.2, 20]; gain [-10, 12]
+    hi = np.array([99.0, math.log(10.0), 11.0])
+    relevant = np.array([True, True, True])
+    u = qmc.Sobol(3, scramble=True, seed=0).random(256)
+    points = global_fit._screened(problem, relevant, lo, hi, u)
+    lag = start + start * points[:, 0]
+    floor = global_fit.SCREEN_FLOOR * start
+    assert np.all((lag >= floor * (1 - 1e-12)) & (lag <= 5.0 * (1 + 1e-12)))
+    decades = np.log10(lag / floor)  # uniform over [0, 5]
+    assert abs(np.mean(lag < start) - 0.6) < 0.05, np.mean(lag < start)
+    assert abs(np.mean(decades) - 2.5) < 0.1 and abs(np.std(decades) - 5 / math.sqrt(12)) < 0.1
+    uniform = lo + (hi - lo) * u
+    assert np.mean(start + start * uniform[:, 0] < start) < 0.02  # what the screening was
+    assert np.array_equal(points[:, 1:], uniform[:, 1:])
