@@ -507,8 +507,9 @@ def _mapping(frequency_problem: _FrequencyProblem, z_start: np.ndarray, lower: n
     return cost, [(c, cost.full(x), k == marked) for k, (c, x) in enumerate(polished)]
 
 
-#: A parameter bounded below by zero (a time constant, a delay) is screened log-uniformly from
-#: this share of its start up to its upper bound (:func:`_screened`).
+#: A parameter bounded below by zero with a positive start (an actuator lag's time constant: the
+#: diagnosis' effects with a frequency response) is screened log-uniformly from this share of its
+#: start up to its upper bound (:func:`_screened`).
 SCREEN_FLOOR = 1e-3
 
 
