@@ -46,10 +46,12 @@ def _stacked(effects: list[dict], delay: int):
     search = Search(train, validation, default_roles(structure, train), DiagnosisOptions(),
                     {"max_evaluations": 400}, lambda line: None)
     model, current = nominal, structure.simulate(nominal.parameters, validation)
+    trials = []
     for candidate in effects:
         trial, model, current = try_candidate(model, candidate, current, search)
         assert trial.parameters, trial.message  # refitted
-    return nominal, model, current, search
+        trials.append(trial)
+    return nominal, model, current, search, trials
 
 
 LAG_CANDIDATE = {"effect": "actuator_lag", "variant": "lag(u, 0.05 s)", "err": 0.5,
@@ -61,7 +63,7 @@ DELAY_CANDIDATE = {"effect": "input_delay", "variant": "delay(u, 0.02 s)", "err"
 def test_an_effect_the_others_make_superfluous_is_dropped_and_the_needed_one_kept():
     # the plant has a lag only: a delay accepted first (it imitates part of the lag's phase) is
     # superfluous once the lag is in the model
-    nominal, model, current, search = _stacked([DELAY_CANDIDATE, LAG_CANDIDATE], delay=0)
+    nominal, model, current, search, _ = _stacked([DELAY_CANDIDATE, LAG_CANDIDATE], delay=0)
     eliminated = backward.eliminate(nominal, model, current, ["input_delay", "actuator_lag"],
                                     search)
     assert eliminated is not None
@@ -80,7 +82,7 @@ def test_an_effect_the_others_make_superfluous_is_dropped_and_the_needed_one_kep
 
 
 def test_two_effects_the_plant_has_are_both_kept():
-    nominal, model, current, search = _stacked([LAG_CANDIDATE, DELAY_CANDIDATE], delay=DELAY)
+    nominal, model, current, search, _ = _stacked([LAG_CANDIDATE, DELAY_CANDIDATE], delay=DELAY)
     # the nominal's two-coefficient numerator can take up to one sample of the delay
     assert model.parameters["input_delay:u"] == pytest.approx(DELAY / RATE, abs=1.2 / RATE)
     assert model.parameters["actuator_lag:u"] == pytest.approx(LAG, rel=0.05)
@@ -90,7 +92,7 @@ def test_two_effects_the_plant_has_are_both_kept():
 
 def test_the_stack_is_read_through_a_pickled_copy():
     # a round's refits come back from worker processes as copies of the nominal
-    nominal, model, _, _ = _stacked([LAG_CANDIDATE], delay=0)
+    nominal, model, _, _, _ = _stacked([LAG_CANDIDATE], delay=0)
     copy = pickle.loads(pickle.dumps(model.structure))
     assert [e for e, _ in backward.layers(copy, nominal.structure)] == ["actuator_lag"]
     other, _ = build_structure("linear-3", _run(1), {})
@@ -102,3 +104,30 @@ def _trial_of(candidate):
 
     return SimpleNamespace(effect=candidate["effect"], variant=candidate["variant"],
                            err=candidate["err"])
+
+
+def test_the_diagnosis_keeps_the_needed_effect_s_step_judged_against_the_nominal():
+    """The pipeline's use of the elimination (pipeline._eliminated): from the search's accepted
+    trials (a delay, then the lag the plant has) to the kept model's free run and steps: one step,
+    the lag's, from the nominal's validation fit to the kept model's; the dropped delay named
+    with its round; nothing done after an offset between the runs."""
+    import dataclasses
+
+    from panto.identification.diagnosis import pipeline, run_offset
+    from panto.identification.diagnosis.nominal import fit_per_output
+
+    nominal, model, current, search, trials = _stacked([DELAY_CANDIDATE, LAG_CANDIDATE], delay=0)
+    before = nominal.structure.simulate(nominal.parameters, search.validation)
+    steps = [pipeline._step(trials[0], search.validation, before, before)] * 2  # only read
+    # for their alternatives and evidence here
+    kept_model, kept_run, kept_steps, dropped = pipeline._eliminated(
+        nominal, model, before, current, steps, trials, search)
+    assert [s.effect for s in kept_steps] == ["actuator_lag"]
+    assert kept_steps[0].fit_before == fit_per_output(search.validation, before)
+    assert kept_steps[0].fit_after == fit_per_output(search.validation, kept_run)
+    assert kept_steps[0].fit_after["y"] > 98.0
+    assert "input_delay:u" not in kept_model.parameters
+    assert [(d["index"], d["effect"]) for d in dropped] == [(0, "input_delay")]
+    assert "input_delay was accepted in round 1 and dropped" in backward.dropped_text(dropped)
+    offset = [dataclasses.replace(trials[0], variant=run_offset.VARIANT), trials[1]]
+    assert pipeline._eliminated(nominal, model, before, current, steps, offset, search) is None

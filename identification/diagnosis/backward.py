@@ -31,12 +31,10 @@ import numpy as np
 from panto.identification.diagnosis.augmentations import (AugmentedStructure,
                                                           describe_augmentation)
 from panto.identification.diagnosis.parallel import map_trials
-from panto.identification.diagnosis.refit import (CONTINUATION_FACTOR, Model, Search, Trial,
-                                                  _finite_run)
+from panto.identification.diagnosis.refit import Model, Search, Trial, long_refit
 from panto.identification.diagnosis.support import (Refit, judge_trial, no_withheld_gain,
                                                      withheld_gain)
 from panto.identification.estimation.base import IdentificationError, ModelStructure
-from panto.identification.estimation.least_squares import fit_least_squares
 
 _FAILURES = (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError)
 
@@ -57,23 +55,18 @@ def layers(structure: ModelStructure, base: ModelStructure
 
 def refit_layers(model: Model, kept: Sequence[tuple[str, Mapping[str, Any]]],
                  base: ModelStructure, search: Search) -> tuple[Model, Any, np.ndarray]:
-    """`base` with the `kept` effects stacked on it, refitted on the training run by least
-    squares from `model`'s values (its free parameters that the stack still has; the budget of
-    a continued refit, :data:`~panto.identification.diagnosis.refit.CONTINUATION_FACTOR` times the
-    candidates': removing an effect moves the optimum of the rest), and its free run on the
-    validation run."""
+    """`base` with the `kept` effects stacked on it, refitted on the training run from `model`'s
+    values (its free parameters that the stack still has) with a continued refit's budget
+    (:func:`~panto.identification.diagnosis.refit.long_refit`: removing an effect moves the
+    optimum of the rest), and its free run on the validation run."""
     structure = base
     for effect, setting in kept:
         structure = AugmentedStructure(structure, effect, search.roles, setting)
     names = set(structure.parameter_names)
-    free = tuple(n for n in model.free if n in names)
-    start = {n: v for n, v in model.parameters.items() if n in names}
-    budget = int(search.fit_options.get("max_evaluations") or 400) * CONTINUATION_FACTOR
-    result = fit_least_squares(structure, search.train, free=free, initial=start,
-                               **{**search.fit_options, "max_evaluations": budget})
-    reduced = Model(structure, dict(result.parameters), free, dict(result.std),
-                    np.asarray(result.covariance, float), dict(result.fit))
-    return reduced, result, _finite_run(reduced, search.validation)
+    result, reduced, simulated = long_refit(
+        structure, tuple(n for n in model.free if n in names),
+        {n: v for n, v in model.parameters.items() if n in names}, search)
+    return reduced, result, simulated
 
 
 def _without(model: Model, item: tuple, current: np.ndarray, search: Search) -> dict[str, Any]:

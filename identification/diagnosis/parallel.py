@@ -149,5 +149,5 @@ def _recorded(task: Callable, item: Any) -> tuple[Any, list[str]]:
     return task(item, lines.append), lines
 
 
-__all__ = ["WORKERS_VARIABLE", "available_cpus", "resolve_workers", "limit_threads", "trial_pool", "map_trials",
-           "map_replayed", "THREAD_VARIABLES"]
+__all__ = ["WORKERS_VARIABLE", "available_cpus", "resolve_workers", "limit_threads", "trial_pool",
+           "map_trials", "map_replayed", "THREAD_VARIABLES"]

@@ -393,21 +393,18 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
     with trial_pool(resolve_workers(options.workers), executor) as pool:
         model, current, rounds, steps, accepted, left, chosen = _search(
             model, before, candidates, search, pool)
-        if options.backward and len(accepted) >= 2 and not any(s.evidence for s in steps) \
-                and not any(t.variant == run_offset.VARIANT for t in chosen):
-            eliminated = backward.eliminate(nominal_model, model, current, accepted, search, pool)
+        by_round = list(accepted)  # each round's accepted effect, None where dropped
+        if options.backward:
+            eliminated = _eliminated(nominal_model, model, before, current, steps, chosen,
+                                     search, pool)
             if eliminated is not None:
-                model, current, left = eliminated["model"], eliminated["simulated"], None
-                steps = [dataclasses.replace(_step(trial, validation, run_before, run_after),
-                                             alternatives=steps[index].alternatives)
-                         for index, (trial, run_before, run_after) in zip(
-                             eliminated["kept"], backward.rejudged(
-                                 nominal_model, before, eliminated, chosen, search))]
-                accepted = [accepted[index] for index in eliminated["kept"]]
-                dropped = eliminated["dropped"]
+                model, current, steps, dropped = eliminated
+                left = None
                 for item in dropped:
+                    by_round[item["index"]] = None
                     rounds = withdraw(rounds, [None] * item["index"] + [item["effect"]],
                                       backward.why_dropped(item))
+                accepted = [effect for effect in by_round if effect is not None]
         remaining_gap = left if left is not None else (
             _gap(model, validation, current, roles) if steps else gap)
         fit_after = fit_per_output(validation, current)
@@ -415,15 +412,11 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
                                executor, progress, pool, options.max_evaluations) \
             if options.challenge and steps and comparable(steps, say) and challengeable(
                 adequacy or adequacy_quietly(nominal, result, train), say) else None
-    withdrawn = list(accepted) if challenger is not None else []
+    withdrawn = accepted if challenger is not None else []
     if challenger is not None:  # the accepted effects yield to an out-of-vocabulary term
-        dropped_rounds = {item["index"] for item in dropped}
-        in_rounds = [None if index in dropped_rounds else withdrawn.pop(0)
-                     for index in range(len(withdrawn) + len(dropped))]
-        withdrawn = [effect for effect in in_rounds if effect is not None]
         model, current, steps, accepted, remaining_gap = nominal_model, before, [], [], gap
         fit_after = fit_per_output(validation, current)
-        rounds = withdraw(rounds, in_rounds, challenger["yielded"])
+        rounds = withdraw(rounds, by_round, challenger["yielded"])
     analysis_after = _analyse(validation, current, model, roles) if steps else analysis_before
     verdict = "effect" if steps else ("unexplained" if gap["significant"] else "none")
     where = where_summary(analysis_before, validation)
@@ -559,6 +552,31 @@ def _search(model: Model, before: np.ndarray, candidates: Sequence[str], search:
                 "a free run that does not follow the record sample by sample")
             break
     return model, current, rounds, steps, accepted, left, chosen_trials
+
+
+def _eliminated(nominal: Model, model: Model, before: np.ndarray, current: np.ndarray,
+                steps: Sequence[Step], chosen: Sequence[Trial], search: Search, pool: Any = None
+                ) -> tuple[Model, np.ndarray, list[Step], list[dict[str, Any]]] | None:
+    """The search's result after the backward elimination
+    (:func:`~panto.identification.diagnosis.backward.eliminate`; `chosen`: the accepted trials
+    in order, `before`/`current`: the nominal's and the model's free runs on the validation
+    run): the kept model, its free run, the kept effects' steps judged again in order (their
+    rounds' alternatives kept) and what was dropped; None when nothing is dropped, or it does
+    not apply (fewer than two effects, a contact loss accepted on its force's distribution, an
+    offset between the runs)."""
+    if len(chosen) < 2 or any(s.evidence for s in steps) or \
+            any(t.variant == run_offset.VARIANT for t in chosen):
+        return None
+    eliminated = backward.eliminate(nominal, model, current, [t.effect for t in chosen], search,
+                                    pool)
+    if eliminated is None:
+        return None
+    kept_steps = [dataclasses.replace(_step(trial, search.validation, run_before, run_after),
+                                      alternatives=steps[index].alternatives)
+                  for index, (trial, run_before, run_after) in zip(
+                      eliminated["kept"], backward.rejudged(nominal, before, eliminated, chosen,
+                                                            search))]
+    return eliminated["model"], eliminated["simulated"], kept_steps, eliminated["dropped"]
 
 
 def _named(candidate: Mapping[str, Any]) -> str:

@@ -243,19 +243,14 @@ def continue_refit(candidate: Mapping[str, Any], entry: tuple[Trial, Model, np.n
     if not stopped_on_budget(trial) or trial.continuation:
         return entry
     candidate = {**candidate, "variant": trial.variant}  # the placement kept (try_candidate)
-    budget = int(search.fit_options.get("max_evaluations") or 400) * CONTINUATION_FACTOR
+    budget = continuation_budget(search)
 
     def unchanged(why: str) -> tuple[Trial, Model, np.ndarray]:
         search.say(f"  {candidate['effect']}: continued: {why}; kept as it was")
         return (dataclasses.replace(trial, continuation=why),) + tuple(entry[1:])
 
     try:
-        result = fit_least_squares(new.structure, search.train, free=new.free,
-                                   initial=dict(new.parameters),
-                                   **{**search.fit_options, "max_evaluations": budget})
-        further = Model(new.structure, dict(result.parameters), new.free, dict(result.std),
-                        np.asarray(result.covariance, float), dict(result.fit))
-        simulated = _finite_run(further, search.validation, search.validation_shift)
+        result, further, simulated = long_refit(new.structure, new.free, new.parameters, search)
     except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError) as error:
         return unchanged(f"failed ({error})")
     _, before = residuals(new.structure, new.parameters, search.train)
@@ -272,6 +267,23 @@ def continue_refit(candidate: Mapping[str, Any], entry: tuple[Trial, Model, np.n
                f"+{judged.improvement:.2f} points: "
                + ("accepted" if judged.accepted else "rejected (" + ", ".join(judged.failed) + ")"))
     return judged, further, simulated
+
+
+def continuation_budget(search: Search) -> int:
+    """:data:`CONTINUATION_FACTOR` times the candidates' budget of simulations."""
+    return int(search.fit_options.get("max_evaluations") or 400) * CONTINUATION_FACTOR
+
+
+def long_refit(structure: ModelStructure, free: tuple[str, ...], start: Mapping[str, float],
+               search: Search) -> tuple[Any, Model, np.ndarray]:
+    """Least squares of `structure` on the training run from `start` for
+    :func:`continuation_budget` simulations: its result, model and free run on the validation run
+    (raising as :func:`_finite_run` where that run diverges)."""
+    result = fit_least_squares(structure, search.train, free=free, initial=dict(start),
+                               **{**search.fit_options, "max_evaluations":
+                                  continuation_budget(search)})
+    model = _model(structure, result, free)
+    return result, model, _finite_run(model, search.validation, search.validation_shift)
 
 
 def stopped_on_budget(fit: Any) -> bool:

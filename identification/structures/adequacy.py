@@ -309,4 +309,5 @@ def _plain(value: float) -> float | None:
     return float(value) if math.isfinite(value) else None
 
 
-__all__ = ["Adequacy", "check_adequacy", "fit_checked", "with_adequacy", "state_order", "RELEVANCE_FLOOR", "SIGNIFICANCE"]
+__all__ = ["Adequacy", "check_adequacy", "fit_checked", "with_adequacy", "state_order",
+           "RELEVANCE_FLOOR", "SIGNIFICANCE"]
