@@ -86,12 +86,17 @@ causes it, and how far the gap shrinks once that effect is in the model.
    as an effect's is). When the best of them gains more validation fit points on its output
    than the first accepted effect gains on any output, no effect is named: the vocabulary's best
    closed only part of a gap that something outside it explains better (a hysteresis is not an
-   actuator lag because a lag closes a tenth of its gap).
+   actuator lag because a lag closes a tenth of its gap). Nor is one named when, on some output,
+   the residual's input-explained part the effects leave costs more fit points (at least the
+   gap tests' 10) than the residual energy they removed there
+   (:func:`~panto.identification.diagnosis.challenge.lesser_part`; not after a contact loss):
+   they imitate the lesser part of a mechanism the vocabulary lacks.
 
 Verdict: ``effect`` (the ordered list), ``none`` (no effect accepted and the gap is not significant:
 within the noise) or ``unexplained`` (a significant gap that no candidate closes on withheld data,
-or that an out-of-vocabulary term explains better than the accepted effects, reported with where
-it lies and the term as a hypothesis). No attribution is forced.
+or that an out-of-vocabulary term explains better than the accepted effects, or of which they
+explain the lesser part, reported with where it lies and the discovery's term as a hypothesis).
+No attribution is forced.
 """
 from __future__ import annotations
 
@@ -104,7 +109,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from panto.identification.diagnosis.challenge import (challenge, challengeable, comparable,
-                                                     discovery_hypothesis, withdraw,
+                                                     discovery_hypothesis, lesser_part, withdraw,
                                                      yielded_summary)
 from panto.identification.diagnosis.effects import EFFECTS, SignalRoles
 from panto.identification.diagnosis.nominal import (Progress, adequacy_quietly, adequate_nominal,
@@ -307,7 +312,9 @@ class DiagnosisOptions:
     (which searches the whole library only after an ``unexplained`` verdict): switch both off for
     the fastest diagnosis. Run whether or not a significant gap remains after the effects (since
     session 45): seen held-out two-mass/sign_blind_sensor/3762, a saturation closed the force's
-    gap to within the noise (+12.35 points) where the kink ``|F_c - 28| - F_c`` gains +15.93."""
+    gap to within the noise (+12.35 points) where the kink ``|F_c - 28| - F_c`` gains +15.93.
+    Also decides whether accepted effects that leave the larger part of the gap on some output
+    are withdrawn (:func:`~panto.identification.diagnosis.challenge.lesser_part`)."""
     backward: bool = True
     """Once two or more effects are accepted, remove each in turn, refit the rest and drop an
     effect the withheld run does not need beside the others (by the forward search's own withheld
@@ -412,16 +419,23 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
                                executor, progress, pool, options.max_evaluations) \
             if options.challenge and steps and comparable(steps, say) and challengeable(
                 adequacy or adequacy_quietly(nominal, result, train), say) else None
-    withdrawn = accepted if challenger is not None else []
-    if challenger is not None:  # the accepted effects yield to an out-of-vocabulary term
+    partial = lesser_part(steps, fit_before, fit_after, remaining_gap) \
+        if options.challenge and challenger is None else None
+    yielded = challenger or partial
+    withdrawn = accepted if yielded is not None else []
+    if yielded is not None:  # the accepted effects yield to an out-of-vocabulary term, or leave
+        # the larger part of the gap
+        if partial is not None:
+            say("diagnose: the accepted effects " + partial["yielded"])
         model, current, steps, accepted, remaining_gap = nominal_model, before, [], [], gap
         fit_after = fit_per_output(validation, current)
-        rounds = withdraw(rounds, by_round, challenger["yielded"])
+        rounds = withdraw(rounds, by_round, yielded["yielded"])
     analysis_after = _analyse(validation, current, model, roles) if steps else analysis_before
-    verdict = "effect" if steps else ("unexplained" if gap["significant"] else "none")
+    verdict = "effect" if steps else (
+        "unexplained" if gap["significant"] or withdrawn else "none")
     where = where_summary(analysis_before, validation)
     summary = (_summary(verdict, accepted, fit_before, fit_after, where, remaining_gap, gap)
-               if challenger is None else yielded_summary(withdrawn, challenger, where)) + \
+               if yielded is None else yielded_summary(withdrawn, yielded, where)) + \
         backward.dropped_text(dropped) + \
         "".join(f"; {s.effect} passed on the {s.evidence}, not on the fit sample by sample (the "
                 "free run of a head that leaves the wire may not be reproducible)"
