@@ -193,18 +193,28 @@ def test_no_challenge_where_no_term_could_gain_more_than_the_effects(backlash):
     assert not any("refit" in line for line in lines) and "no output" in lines[-1]
 
 
-def test_one_mechanism_is_set_against_one_not_against_the_stacked_effects():
+def test_one_mechanism_is_set_against_one_not_against_the_stacked_effects(monkeypatch):
     """The seen held-out case three-mass/sign_blind_sensor/3477 (a force sensor reading
     ``r + |F - r|``, out of the vocabulary; the force alone, a chirp at 50 Hz, 20 s). The
     vocabulary stacks effects (here two: saturation, then a sensor mass) whose validation
-    gains add up to more than the kink of the force gains, while the kink alone gains more than
-    the saturation chosen first. Set against the stacked effects the kink lost and the three
-    were named; set against the first, one mechanism against one, it wins: `unexplained`, the
-    kink as the hypothesis."""
+    gains add up to more than the first one's. Set against the stacked effects a term could lose
+    where it beats the first (session 45: the kink gained 39.7 points, the saturation 30.3, the
+    stack 57.8); set against the first, one mechanism against one. The challenge is handed the
+    first effect's validation fits, not the stack's: `unexplained`, the kink as the hypothesis.
+    (Since session 48 the terms' refits start from the nominal's optimum and the kink gains 61.8
+    points, more than the stack too.)"""
     from fixtures.excitations import load_benchmark
 
+    from panto.identification.diagnosis import pipeline
     from panto.identification.diagnosis.pipeline import DiagnosisOptions, diagnose
 
+    handed = []
+
+    def recorded(nominal, train, validation, fit_before, fit_after, *args, **kwargs):
+        handed.append(dict(fit_after))
+        return challenge(nominal, train, validation, fit_before, fit_after, *args, **kwargs)
+
+    monkeypatch.setattr(pipeline, "challenge", recorded)
     plants, harness = load_benchmark("effect_plants"), load_benchmark("diagnosis_families")
     case = plants.effect_case(plants.draw_spec("three-mass", "sign_blind_sensor", 3477,
                                                quick=True), scored=False)
@@ -215,12 +225,10 @@ def test_one_mechanism_is_set_against_one_not_against_the_stacked_effects():
     assert result.verdict == "unexplained" and result.effects == (), result.summary
     assert result.discovery["families"][0] == "abs", result.discovery
     withdrawn = [t for r in result.rounds for t in r["tried"] if t.get("withdrawn")]
-    assert [t["effect"] for t in withdrawn][:1] == ["saturation"], withdrawn
-    before = result.fit_before["F_c"]
-    first = withdrawn[0]["fit_validation"]["F_c"] - before
-    stacked = withdrawn[-1]["fit_validation"]["F_c"] - before
-    assert len(withdrawn) >= 2 and first < result.discovery["gain"] < stacked, \
-        (first, result.discovery["gain"], stacked)
+    assert [t["effect"] for t in withdrawn] == ["saturation", "sensor_inertia"], withdrawn
+    first, stacked = (withdrawn[k]["fit_validation"]["F_c"] for k in (0, -1))
+    assert handed == [withdrawn[0]["fit_validation"]] and first < stacked  # the first, alone
+    assert first - result.fit_before["F_c"] < result.discovery["gain"]
 
 
 def test_the_challenge_runs_where_the_effects_leave_only_noise():
@@ -326,3 +334,27 @@ def test_a_clip_is_read_from_the_slope_below_every_kink():
     assert not a_clip(made(("abs", 1.0))) and not a_clip(made(("abs", 0.1)))
     assert not a_clip(made(("abs", 0.5), ("abs", 0.5)))  # together: a fold below both
     assert not a_clip(made(("play", 0.5))) and not a_clip(made())
+
+
+def test_a_terms_refit_starts_from_the_nominals_optimum(backlash):
+    """A term's refit starts from the nominal's fitted values with the term's least-squares
+    coefficient, so it can only descend from the nominal's training cost: even stopped after a
+    few simulations, no refit ends below the nominal's training fit (until session 48 the
+    structure's defaults overrode the fitted values: a fold's refit started there ended in
+    another basin, seen held-out two-mass/sign_blind_sensor/5142)."""
+    from panto.identification.diagnosis.discovery import _Refit
+
+    model, train, validation = backlash
+    simulated = model.structure.simulate(model.parameters, train)
+    terms = term_library(model.structure, train, simulated, DiscoveryOptions(**CHALLENGE))
+    assert terms
+    defaults = model.structure.nominal()
+    assert any(abs(defaults[k] - model.parameters[k]) > 0.1 * abs(model.parameters[k])
+               for k in model.free)  # the optimum lies away from the defaults
+    refit = _Refit(model.structure, model.parameters, model.free, train, validation,
+                   DiscoveryOptions(**{**CHALLENGE, "max_evaluations": 3}), None,
+                   lambda line: None)
+    for term in terms[:4]:
+        hypothesis = refit.run("y", [term])
+        assert hypothesis is not None
+        assert hypothesis.fit_train_after >= hypothesis.fit_train_before - 1e-9, term.formula

@@ -72,16 +72,19 @@ def test_effects_that_leave_the_larger_part_are_withdrawn_only_then():
     assert lesser_part([], before, after, _left(y_cb=22.5)) is None
 
 
-def test_a_sign_blind_sensor_is_not_named_after_the_mode_imitating_it():
+def test_a_sign_blind_sensor_is_not_named_after_the_mode_imitating_it(monkeypatch):
     """The seen held-out case two-mass/sign_blind_sensor/4992 (the bar's laser reads
     ``r + |y - r|``, out of the vocabulary): an extra mode passes the withheld tests on the force
     and is named without the check; it removes nothing on the bar, whose residual keeps an
     input-explained part of more than the clear gap: with the check the verdict is
-    ``unexplained`` and the report says why."""
+    ``unexplained`` and the report says why. The challenge's terms are taken away here (since
+    session 48 its kink of the bar wins on this case by itself): the check stands on its own."""
     from fixtures.excitations import load_benchmark
 
+    from panto.identification.diagnosis import pipeline
     from panto.identification.diagnosis.pipeline import DiagnosisOptions, diagnose
 
+    monkeypatch.setattr(pipeline, "challenge", lambda *args, **kwargs: None)
     plants, harness = load_benchmark("effect_plants"), load_benchmark("diagnosis_families")
     case = plants.effect_case(plants.draw_spec("two-mass", "sign_blind_sensor", 4992,
                                                quick=True), scored=False)
