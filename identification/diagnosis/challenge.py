@@ -21,6 +21,7 @@ import numpy as np
 
 from panto.identification.diagnosis.nominal import Progress, indented
 from panto.identification.diagnosis.refit import Model
+from panto.identification.diagnosis.support import CLEAR_GAP
 from panto.identification.estimation.base import IdentificationData, IdentificationError
 
 
@@ -111,23 +112,33 @@ CHALLENGE = {"families": CHALLENGERS, "delays": (), "derivatives": False, "admit
              "refuse": a_clip}
 
 
-def comparable(steps: Sequence[Any], say: Progress) -> bool:
-    """Whether the accepted effects' (:class:`~panto.identification.diagnosis.pipeline.Step`)
-    withheld gains can be compared with a challenger's: not
-    when one passed on other evidence than the sample-by-sample fit (a flying head's contact
-    loss on its force's distribution), nor after a contact loss at all: where the head leaves the
-    wire the instants of its landings are not reproducible, which bounds the contact loss's gain
-    sample by sample and not a smooth term's (tuning split three-mass/contact_loss/53, once the
-    terms' refits started from the nominal's optimum: a kink of the force with a play gained
-    14.17 points, the true contact loss 12.72; the same exemption as :func:`lesser_part`'s)."""
+def not_by_fit(steps: Sequence[Any]) -> str | None:
+    """Why the accepted effects' (:class:`~panto.identification.diagnosis.pipeline.Step`)
+    withheld gains cannot be read sample by sample against a term's or against the residual they
+    leave, or None: one passed on other evidence than the sample-by-sample fit (a flying head's
+    contact loss on its force's distribution), or one is a contact loss at all: where the head
+    leaves the wire the instants of its landings are not reproducible, which bounds the contact
+    loss's gain sample by sample and not a smooth term's (tuning split three-mass/contact_loss/53,
+    once the terms' refits started from the nominal's optimum: a kink of the force with a play
+    gained 14.17 points, the true contact loss 12.72). Shared by :func:`comparable` and
+    :func:`lesser_part`."""
     other = [s.effect for s in steps if s.evidence]
     if other:
-        say(f"diagnose: the accepted effects are not challenged: {', '.join(other)} passed on "
-            "the withheld run's statistics, which a term's fit gain cannot be compared with")
-    elif any(s.effect == "contact_loss" for s in steps):
-        say("diagnose: the accepted effects are not challenged: a contact loss's withheld gain "
-            "is bounded by its landings' timing, which a term's fit gain is not")
-    return not other and not any(s.effect == "contact_loss" for s in steps)
+        return (f"{', '.join(other)} passed on the withheld run's statistics, which a term's fit "
+                "gain cannot be compared with")
+    if any(s.effect == "contact_loss" for s in steps):
+        return ("a contact loss's withheld gain is bounded by its landings' timing, which a "
+                "term's fit gain is not")
+    return None
+
+
+def comparable(steps: Sequence[Any], say: Progress) -> bool:
+    """Whether the accepted effects' withheld gains can be compared with a challenger's
+    (:func:`not_by_fit`); says why not."""
+    why = not_by_fit(steps)
+    if why:
+        say("diagnose: the accepted effects are not challenged: " + why)
+    return why is None
 
 
 def challengeable(adequacy: Any, say: Progress) -> bool:
@@ -259,11 +270,9 @@ def lesser_part(steps: Sequence[Any], fit_before: Mapping[str, float],
     explain in part (tuning split three-mass/contact_loss/53: 28.5 points removed on the bar,
     34.5 left; two-mass/contact_loss/38: 74.5, 98.8), nor for an effect accepted on other
     evidence than the fit sample by sample. No new threshold: CLEAR_GAP is the gap tests' own,
-    and "more than it removed" is the majority of the known systematic energy."""
-    from panto.identification.diagnosis.support import CLEAR_GAP
-
-    if not steps or not remaining.get("significant") or any(
-            s.evidence or s.effect == "contact_loss" for s in steps):
+    and "more than it removed" is the majority of the known systematic energy (:func:`not_by_fit`
+    says which steps are exempt)."""
+    if not steps or not remaining.get("significant") or not_by_fit(steps):
         return None
     short = []
     for output, entry in (remaining.get("per_output") or {}).items():
@@ -294,4 +303,4 @@ def hypothesis_text(report: Mapping[str, Any]) -> str:
 
 __all__ = ["CHALLENGERS", "CHALLENGE", "a_clip", "challenger", "challenge", "challengeable",
            "comparable", "discovery_hypothesis", "hypothesis_text", "lesser_part",
-           "removed_points", "withdraw", "yielded_summary"]
+           "not_by_fit", "removed_points", "withdraw", "yielded_summary"]
