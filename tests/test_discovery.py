@@ -77,6 +77,28 @@ def test_play_operator_and_low_pass_follow_their_definitions():
     assert step[50] == pytest.approx(1.0 - np.exp(-0.5 / 0.5), rel=1e-12)  # 50 steps of 0.01 s
 
 
+def test_the_compiled_play_operator_is_the_python_loop_bit_for_bit(monkeypatch):
+    """The C play operator against the loop it replaces (the same comparisons, so the same
+    values): random walks, a zero and a wide radius, a NaN sample, one and no samples; and the
+    loop runs where the kernel is switched off."""
+    from panto.identification.diagnosis import discovery
+
+    assert discovery._play_kernel() is not None  # gcc is part of the set-up: the kernel builds
+    rng = np.random.default_rng(7)
+    walk = np.cumsum(rng.normal(size=3000))
+    gappy = walk.copy()
+    gappy[1234] = np.nan
+    for s in (walk, gappy, walk[:1], walk[:0]):
+        for radius in (0.0, 0.37, 50.0):
+            assert np.array_equal(play(s, radius), discovery.play_loop(s, radius),
+                                  equal_nan=True), (len(s), radius)
+    called = []
+    monkeypatch.setenv("PANTO_PLAY_KERNEL", "0")
+    monkeypatch.setattr(discovery, "play_loop", lambda s, r: called.append(r) or s)
+    play(walk, 0.5)
+    assert called == [0.5]
+
+
 def test_term_structure_adds_the_term_to_the_nominal_simulation():
     data = _run(3, lambda y: y)
     term = Term("cube", (Signal("output", "y"),))
