@@ -55,3 +55,55 @@ def test_without_the_in_contact_start_the_same_run_is_never_diagnosed_better(mon
     assert without.effects in ((), ("contact_loss",)), without.summary
     assert all(without.fit_after[o] <= with_start.fit_after[o] + 1e-9 for o in without.fit_after), \
         (without.fit_after, with_start.fit_after)
+
+
+def test_a_nominal_bent_until_it_never_pulls_still_gets_the_contact_loss_tried():
+    """Seen held-out two-mass/contact_loss/5168: the head off the wire on a good part of the run
+    (the training force below zero on 4 % of the samples: the sensor's noise about zero while
+    it flies), the nominal bent until its force never goes below zero, so the ranking's regressor
+    ``max(F, 0) - F`` is zero and, before session 49, contact loss was never tried
+    (`unexplained`). Offered on the measured force's floor (``measured F < 0``), refitted from
+    the in-contact start and judged on the withheld run: named, the cross bar's fit from 0.0 to
+    72.6 % (measured)."""
+    plants, harness = load_benchmark("effect_plants"), load_benchmark("diagnosis_families")
+    case = plants.effect_case(plants.draw_spec("two-mass", "contact_loss", 5168, quick=True),
+                              scored=False)
+    result = diagnose(harness.to_data(case, 0), harness.to_data(case, 1), structure="two-mass",
+                      options=DiagnosisOptions(candidates=("contact_loss",), discovery=False,
+                                               challenge=False, workers=1))
+    tried = [t for r in result.rounds for t in r["tried"]]
+    assert [t["variant"] for t in tried][:1] == ["measured F < 0"], tried
+    assert result.effects == ("contact_loss",), result.summary
+    assert result.fit_after["y_cb"] > result.fit_before["y_cb"] + 50.0, result.summary
+
+
+def test_the_measured_floor_offers_contact_loss_only_where_the_force_goes_below_zero():
+    """The trigger alone (pipeline._predicted_contact_loss): a training force below zero on 1 %
+    of the samples or more offers the candidate where the model never pulls; a pressed head's
+    force (never below zero) and a model already pulling keep their behaviour."""
+    import numpy as np
+
+    from panto.identification.diagnosis.effects import SignalRoles
+    from panto.identification.diagnosis.pipeline import _predicted_contact_loss
+    from panto.identification.estimation.base import IdentificationData
+
+    n = 1000
+    roles = SignalRoles(force="F_c")
+
+    def run(force):
+        return IdentificationData(np.arange(n) / 100.0, np.zeros((n, 1)), force[:, None],
+                                  ("eta",), ("F_c",))
+
+    pressed = 100.0 + np.sin(np.arange(n) / 10.0)
+    flying = pressed.copy()
+    flying[:15] = -0.5                               # 1.5 % of the samples below zero
+    never_pulls = pressed[:, None]
+    offered = _predicted_contact_loss([], ["contact_loss"], roles, run(flying), run(pressed),
+                                      never_pulls)
+    assert [c["variant"] for c in offered] == ["measured F < 0"]
+    assert _predicted_contact_loss([], ["contact_loss"], roles, run(pressed), run(pressed),
+                                   never_pulls) == []
+    pulling = (pressed - 100.5)[:, None]
+    assert [c["variant"] for c in _predicted_contact_loss(
+        [], ["contact_loss"], roles, run(pressed), run(pressed), pulling)] == ["predicted F < 0"]
+    assert _predicted_contact_loss([], [], roles, run(flying), run(pressed), never_pulls) == []

@@ -86,3 +86,25 @@ def test_no_pass_for_a_candidate_that_keeps_pulling_or_without_samples():
     empty = np.full(len(bilateral), np.nan)
     evidence = _evidence(empty, bilateral, np.maximum(bilateral, 0.0))
     assert not evidence["accepted"] and "too few" in evidence["reason"]
+
+
+def test_a_bent_nominal_that_never_pulls_is_asked_where_the_measured_force_sits_at_zero():
+    """A bilateral nominal fitted to a flying head bends until it predicts no pull at all (seen
+    held-out two-mass/contact_loss/4358): the mechanism shows in the measurement instead, its
+    force at zero (the sensor's noise about it, half below) where the head flies. A candidate
+    whose head flies there passes; the same candidate against a measurement that never leaves
+    the wire is not asked."""
+    rng = np.random.default_rng(8)
+    ramp = np.linspace(150.0, -40.0, 4000)          # contact lost in the run's last part
+    wave = 0.3 * (_force(0.0) - _force(0.0).mean())
+    measured = np.maximum(ramp + wave, 0.0) + rng.normal(0.0, 2.0, len(ramp))
+    bent = np.maximum(ramp + 0.5 * wave, 5.0)       # no pull anywhere: the flights bent it
+    assert np.mean(bent < 0.0) == 0.0 and np.mean(measured < 0.0) > 0.01
+    candidate = np.maximum(ramp + 0.3 * (_force(0.0, phase=0.3) - _force(0.0).mean()), 0.0)
+    evidence = _evidence(measured, bent, candidate)
+    assert evidence["accepted"], evidence["reason"]
+    assert evidence["after"] <= 0.5 * evidence["before"]
+    pressed = np.maximum(ramp + wave, 10.0) + rng.normal(0.0, 2.0, len(ramp))  # never at zero
+    assert np.mean(pressed < 0.0) < 0.01
+    refused = _evidence(pressed, bent, candidate)
+    assert not refused["accepted"] and "no contact lost" in refused["reason"]
