@@ -51,3 +51,27 @@ def test_a_change_that_explains_nothing_rarely_passes():
         passed += t > 3.0
     assert passed <= 2, passed
     assert 0.8 < np.std(values) < 1.2  # the N_eff scaling keeps t standard
+
+
+def test_a_gain_in_one_fold_passes_for_a_contact_loss_only():
+    """Since session 49 the withheld regression passes a gain in one part of the run for a
+    contact loss only (its flights may fill one part of the run); for the other effects it had
+    passed only wrong names (support.local_gain_may_pass). The same change: the folds' test
+    fails it, the regression passes it where allowed."""
+    from panto.identification.diagnosis.support import (NO_GAIN_REASONS, local_gain_may_pass,
+                                                        no_withheld_gain, withheld_gain)
+
+    rng = np.random.default_rng(0)
+    n = 2000
+    model = 20.0 * np.sin(np.arange(n) * 0.01)
+    effect = _burst(n)
+    data = _run(model + effect + 0.3 * rng.normal(size=n))
+    current, candidate = model[:, None], (model + effect)[:, None]
+    gain = withheld_gain(data, current, candidate, 4)
+    assert gain["best"] > 0.2 and not gain["improvement"] > gain["standard_error"]
+    assert no_withheld_gain(gain, data, current, candidate, local=True) == []
+    failed = no_withheld_gain(gain, data, current, candidate, local=False)
+    assert len(failed) == 1 and failed[0].startswith(NO_GAIN_REASONS[1]), failed
+    assert local_gain_may_pass("contact_loss")
+    assert not any(local_gain_may_pass(e) for e in ("saturation", "extra_mode", "dead_zone",
+                                                     "coulomb_friction", "actuator_lag"))

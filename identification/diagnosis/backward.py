@@ -13,8 +13,8 @@ refitted on the training run (least squares from the full model's values; the re
 own parameters gone). An effect is kept only when the full model still gains on the withheld run
 over the model without it by the forward search's own withheld tests
 (:func:`~panto.identification.diagnosis.support.no_withheld_gain`: a best output improving by the
-relevance floor, a mean gain above the folds' standard error or a local ``t`` above
-:data:`~panto.identification.diagnosis.support.LOCAL_T`). Of the effects that fail it, the one
+relevance floor, a mean gain above the folds' standard error or, for a contact loss, a local
+``t`` above :data:`~panto.identification.diagnosis.support.LOCAL_T`). Of the effects that fail it, the one
 whose removal costs least is dropped and the elimination repeats on the rest. No new threshold:
 model selection on the withheld run with the tests every effect passed to be accepted.
 
@@ -32,8 +32,8 @@ from panto.identification.diagnosis.augmentations import (AugmentedStructure,
                                                           describe_augmentation)
 from panto.identification.diagnosis.parallel import map_trials
 from panto.identification.diagnosis.refit import Model, Search, Trial, long_refit
-from panto.identification.diagnosis.support import (Refit, judge_trial, no_withheld_gain,
-                                                     withheld_gain)
+from panto.identification.diagnosis.support import (Refit, judge_trial, local_gain_may_pass,
+                                                     no_withheld_gain, withheld_gain)
 from panto.identification.estimation.base import IdentificationError, ModelStructure
 
 _FAILURES = (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError)
@@ -81,7 +81,8 @@ def _without(model: Model, item: tuple, current: np.ndarray, search: Search) -> 
         search.say(f"  without {stack[index][0]}: refit failed ({error}); kept")
         return {"index": index, "failed": [], "why": f"refit failed ({error})"}
     gain = withheld_gain(search.validation, simulated, current, search.options.folds)
-    failed = no_withheld_gain(gain, search.validation, simulated, current)
+    failed = no_withheld_gain(gain, search.validation, simulated, current,
+                              local=local_gain_may_pass(stack[index][0]))
     search.say(f"  without {stack[index][0]} (the rest refitted: {result.message}): the full "
                f"model gains {gain['improvement']:+.2f} points on the withheld run (folds' "
                f"standard error {gain['standard_error']:.2f}): " +
