@@ -23,13 +23,19 @@ def _burst(n: int) -> np.ndarray:
     return 2.0 * window * np.sin(2 * np.pi * 6.0 * t)
 
 
-def test_a_gain_in_one_fold_fails_the_folds_but_not_the_withheld_regression():
+def _burst_case():
+    """A record with the burst on a smooth model, the model's and the model with the burst's
+    free runs."""
     rng = np.random.default_rng(0)
     n = 2000
     model = 20.0 * np.sin(np.arange(n) * 0.01)
     effect = _burst(n)
     data = _run(model + effect + 0.3 * rng.normal(size=n))
-    current, candidate = model[:, None], (model + effect)[:, None]
+    return data, model[:, None], (model + effect)[:, None]
+
+
+def test_a_gain_in_one_fold_fails_the_folds_but_not_the_withheld_regression():
+    data, current, candidate = _burst_case()
     folds = fold_improvements(data, current, candidate, 4)[:, 0]
     assert folds.mean() > 0
     assert folds.mean() <= folds.std(ddof=1) / 2.0 + 1e-9  # the folds' test cannot pass it
@@ -61,12 +67,7 @@ def test_a_gain_in_one_fold_passes_for_a_contact_loss_only():
     from panto.identification.diagnosis.support import (NO_GAIN_REASONS, local_gain_may_pass,
                                                         no_withheld_gain, withheld_gain)
 
-    rng = np.random.default_rng(0)
-    n = 2000
-    model = 20.0 * np.sin(np.arange(n) * 0.01)
-    effect = _burst(n)
-    data = _run(model + effect + 0.3 * rng.normal(size=n))
-    current, candidate = model[:, None], (model + effect)[:, None]
+    data, current, candidate = _burst_case()
     gain = withheld_gain(data, current, candidate, 4)
     assert gain["best"] > 0.2 and not gain["improvement"] > gain["standard_error"]
     assert no_withheld_gain(gain, data, current, candidate, local=True) == []
