@@ -1,7 +1,8 @@
 """The withheld-gain test for a change that acts in one part of the run only
 (identification/diagnosis/support.py ``withheld_t``): the folds' t test cannot pass a gain that
 sits in one of K folds (the folds' mean then equals their standard error whatever the gain), so a
-candidate also passes when its change explains the withheld residual with t > 3."""
+contact loss also passes when its change explains the withheld residual with t > 3 (every
+candidate did before session 49)."""
 from __future__ import annotations
 
 import numpy as np
