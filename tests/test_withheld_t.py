@@ -77,3 +77,18 @@ def test_a_gain_in_one_fold_passes_for_a_contact_loss_only():
     assert local_gain_may_pass("contact_loss")
     assert not any(local_gain_may_pass(e) for e in ("saturation", "extra_mode", "dead_zone",
                                                      "coulomb_friction", "actuator_lag"))
+
+
+def test_a_losing_change_that_the_regression_would_pass_is_not_said_to_fail_it():
+    """The reason names what failed: a contact loss whose withheld gain is negative while its
+    change explains the residual with t > 3 (seen held-out three-mass/contact_loss/6353 read
+    "t = 4.6 <= 3" before)."""
+    from panto.identification.diagnosis.support import no_withheld_gain, withheld_gain
+
+    data, current, candidate = _burst_case()
+    worse = current + 3.0 * (candidate - current)   # the burst, overshot threefold
+    gain = withheld_gain(data, current, worse, 4)
+    assert gain["improvement"] < 0
+    assert withheld_t(data, current, worse)["F"] > 3.0
+    failed = " ".join(no_withheld_gain(gain, data, current, worse, local=True))
+    assert "and not positive" in failed and "<= 3" not in failed, failed

@@ -344,10 +344,14 @@ def no_withheld_gain(gain: Mapping[str, Any], validation: IdentificationData,
                       f"(best {gain['best']:.2f})")
     t = max(withheld_t(validation, current, simulated).values()) if local else math.nan
     if not (improvement > 0 and (improvement > gain["standard_error"] or t > LOCAL_T)):
+        if not local:
+            why = ""
+        elif t > LOCAL_T:  # the regression would pass a positive gain only
+            why = f", and not positive (its change's t = {t:.1f} passes a positive gain only)"
+        else:
+            why = f", and its change explains the withheld residual with t = {t:.1f} <= {LOCAL_T:g}"
         failed.append(f"{NO_GAIN_REASONS[1]} {improvement:.2f} not above the folds' standard "
-                      f"error {gain['standard_error']:.2f}" +
-                      (f", and its change explains the withheld residual with t = {t:.1f} <= "
-                       f"{LOCAL_T:g}" if local else ""))
+                      f"error {gain['standard_error']:.2f}{why}")
     return failed
 
 
