@@ -43,6 +43,14 @@ KEPT_SHARE = 0.5
 PULLING_SHARE = QUANTILES[0]
 
 
+def below_zero(force: np.ndarray) -> float:
+    """The share of `force`'s samples below zero (a NaN is not): a bilateral model pulling the
+    head, or a measured head off the wire reading its sensor's noise about zero; the mechanism
+    shows where it reaches :data:`PULLING_SHARE`."""
+    force = np.asarray(force, float)
+    return float(np.mean(force < 0.0)) if force.size else 0.0
+
+
 def quantile_misfit(measured: np.ndarray, simulated: np.ndarray, scale: float) -> float:
     """Root mean square of the differences of the :data:`QUANTILES` of `simulated` and
     `measured` (finite samples of both), divided by `scale`; NaN without samples."""
@@ -69,8 +77,7 @@ def statistics_evidence(validation: IdentificationData, current: np.ndarray,
     if not (scale > 0 and y.size >= 10 * max(1, folds)):
         return {"accepted": False, "before": math.nan, "after": math.nan, "folds": [],
                 "reason": f"{output} has too few finite samples or no spread on the withheld run"}
-    pulling, still = float(np.mean(c < 0.0)), float(np.mean(s < 0.0))
-    floor = float(np.mean(y < 0.0))
+    pulling, still, floor = below_zero(c), below_zero(s), below_zero(y)
     shows = max(pulling, floor)
     if not (shows >= PULLING_SHARE and still < 0.1 * shows):
         return {"accepted": False, "before": math.nan, "after": math.nan, "folds": [],
@@ -82,7 +89,7 @@ def statistics_evidence(validation: IdentificationData, current: np.ndarray,
     pairs = [(quantile_misfit(y[b], c[b], scale), quantile_misfit(y[b], s[b], scale))
              for b in blocks]
     acting = [pair for b, pair in zip(blocks, pairs)
-              if max(np.mean(c[b] < 0.0), np.mean(y[b] < 0.0)) >= PULLING_SHARE]
+              if max(below_zero(c[b]), below_zero(y[b])) >= PULLING_SHARE]
     every_fold = all(a < b for b, a in acting)
     accepted = bool(after <= KEPT_SHARE * before and every_fold)
     reason = (f"{output}'s distribution on the withheld run (quantiles {QUANTILES[0]:g}-"
@@ -94,4 +101,5 @@ def statistics_evidence(validation: IdentificationData, current: np.ndarray,
             "reason": reason}
 
 
-__all__ = ["QUANTILES", "KEPT_SHARE", "PULLING_SHARE", "quantile_misfit", "statistics_evidence"]
+__all__ = ["QUANTILES", "KEPT_SHARE", "PULLING_SHARE", "below_zero", "quantile_misfit",
+           "statistics_evidence"]

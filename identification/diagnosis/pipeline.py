@@ -118,7 +118,7 @@ from panto.identification.diagnosis.nominal import (Progress, adequacy_quietly, 
                                                     simulate)
 from panto.identification.diagnosis.parallel import map_trials, resolve_workers, trial_pool
 from panto.identification.diagnosis.augmentations import INPUT_SIDE
-from panto.identification.diagnosis.contact_statistics import PULLING_SHARE
+from panto.identification.diagnosis.contact_statistics import PULLING_SHARE, below_zero
 from panto.identification.diagnosis.ranking import RIVALS, rank_candidates
 from panto.identification.diagnosis.refit import (ADDS_DYNAMICS, LINEAR_SHORTFALL, Model, Search,
                                                   Trial, lacks_linear_dynamics, try_candidate)
@@ -697,8 +697,7 @@ def _predicted_contact_loss(top: Sequence[Mapping[str, Any]], remaining: Sequenc
             force not in validation.output_names:
         return []
     predicted = np.nanmin(current[:, validation.output_names.index(force)]) < 0.0
-    measured = force in train.output_names and \
-        np.mean(train.output(force) < 0.0) >= PULLING_SHARE
+    measured = force in train.output_names and below_zero(train.output(force)) >= PULLING_SHARE
     if not (predicted or measured):
         return []
     return [{"effect": "contact_loss", "variant": "predicted F < 0" if predicted else

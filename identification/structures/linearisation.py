@@ -388,9 +388,7 @@ def propagate(phi: np.ndarray, drive: np.ndarray, x0: np.ndarray) -> np.ndarray:
     for i, lam in enumerate(eigenvalues):
         if lam.imag < 0.0:
             continue  # the conjugate of a pair counted twice below
-        z = static_kernel.first_order_filter(lam, modal_drive[:, i], z0[i])
-        if z is None:
-            z = _lfilter(lam, modal_drive[:, i], z0[i])
+        z = mode_filter(lam, modal_drive[:, i], z0[i])
         weight = 2.0 if lam.imag > 0.0 else 1.0
         if not static_kernel.accumulate_mode(states, z, vectors[:, i], weight):
             states += weight * (np.outer(z.real, vectors[:, i].real)
@@ -398,9 +396,15 @@ def propagate(phi: np.ndarray, drive: np.ndarray, x0: np.ndarray) -> np.ndarray:
     return states
 
 
-def _lfilter(lam: complex, drive: np.ndarray, z0: complex) -> np.ndarray:
-    """:func:`~panto.identification.structures.static_kernel.first_order_filter` by
-    :func:`scipy.signal.lfilter` (no compiler, or ``PANTO_STATIC_KERNEL=0``)."""
+def mode_filter(lam: complex, drive: np.ndarray, z0: complex) -> np.ndarray:
+    """One mode's ``z[k+1] = lam z[k] + drive[k]`` from ``z[0] = z0`` (complex, length
+    ``len(drive) + 1``): compiled
+    (:func:`~panto.identification.structures.static_kernel.first_order_filter`), else by
+    :func:`scipy.signal.lfilter` (no compiler, or ``PANTO_STATIC_KERNEL=0``): the same values.
+    Shared with :func:`panto.identification.structures.oscillators.propagate`."""
+    z = static_kernel.first_order_filter(lam, drive, z0)
+    if z is not None:
+        return z
     from scipy import signal  # here only: importing scipy.signal takes 0.3 s
 
     z = np.empty(len(drive) + 1, complex)

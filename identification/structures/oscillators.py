@@ -39,11 +39,12 @@ import math
 from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
-from scipy import linalg, signal
+from scipy import linalg
 
 from panto.identification.estimation.base import (IdentificationData, IdentificationError, IdentificationResult,
                                  ModelStructure)
-from panto.identification.structures import friction_kernel, static_kernel
+from panto.identification.structures import friction_kernel
+from panto.identification.structures.linearisation import mode_filter
 
 #: Model inputs and the outputs a structure can simulate.
 INPUT_NAMES = ("eta", "p")
@@ -362,8 +363,8 @@ def propagate(phi: np.ndarray, drive: np.ndarray, x0: np.ndarray) -> np.ndarray:
     """States of ``x[k+1] = Phi x[k] + drive[k]`` from ``x0``, shape ``(len(drive) + 1, n)``.
 
     Runs as one first-order filter per eigenvalue of ``Phi`` (modal coordinates) when the
-    eigenvectors are well conditioned, otherwise as a plain loop. The filter is the compiled
-    :func:`~panto.identification.structures.static_kernel.first_order_filter` (bit for bit
+    eigenvectors are well conditioned, otherwise as a plain loop. The filter is
+    :func:`~panto.identification.structures.linearisation.mode_filter` (compiled, bit for bit
     :func:`scipy.signal.lfilter`, which runs without a compiler) and the modal solves NumPy's
     (the same LAPACK routine as SciPy's without its checks): the same values as before, a third
     faster. :func:`~panto.identification.structures.linearisation.propagate` runs a complex pair
@@ -377,13 +378,7 @@ def propagate(phi: np.ndarray, drive: np.ndarray, x0: np.ndarray) -> np.ndarray:
         z0 = np.linalg.solve(vectors, x0.astype(complex))
         modal = np.empty((len(drive) + 1, len(x0)), complex)
         for i, lam in enumerate(eigenvalues):
-            z = static_kernel.first_order_filter(lam, modal_drive[:, i], z0[i])
-            if z is None:
-                z = np.empty(len(drive) + 1, complex)
-                z[0] = z0[i]
-                z[1:], _ = signal.lfilter([1.0], [1.0, -lam], modal_drive[:, i],
-                                          zi=[lam * z0[i]])
-            modal[:, i] = z
+            modal[:, i] = mode_filter(lam, modal_drive[:, i], z0[i])
         return np.real(modal @ vectors.T)
     states = np.empty((len(drive) + 1, len(x0)))
     states[0] = x0
