@@ -155,6 +155,31 @@ def test_linear_oe_feedback_is_the_polynomial_oe_recursion():
     assert np.allclose(y, ref, atol=1e-12)
 
 
+@pytest.mark.parametrize("order, friction", [(2, []), (4, [(0.3, 0.02), (-0.1, 0.0)]),
+                                             (0, [(0.2, 0.0)]), (1, [(0.5, 1e-3)])])
+def test_the_compiled_oe_recursion_is_the_loop_bit_for_bit(order, friction, monkeypatch):
+    """The compiled recursion (output_error.RECURSION_SOURCE) against its Python loop: the same
+    values to the last bit, with cubic and offset terms, tanh and sign friction, zero
+    coefficients skipped, order 0; with the kernel switched off the loop runs."""
+    from panto.identification.structures import output_error
+    rng = np.random.default_rng(order)
+    f = [1.0] + list(rng.uniform(-0.3, 0.3, order))
+    if order >= 2:
+        f[2] = 0.0  # a zero coefficient is skipped by both
+    b = list(0.3 * rng.normal(size=order + 1))
+    other, drive = (0.2 * rng.normal(size=800)).tolist(), rng.normal(size=800).tolist()
+    arguments = (f, b, other, drive, -0.05, 0.1, friction)
+    loop = output_error.recursion_loop(*arguments)
+    assert output_error._recursion_kernel() is not None  # the suite's machines have gcc
+    assert np.array_equal(output_error._recursion(*arguments), loop)
+    assert np.all(np.isfinite(loop)) and np.std(loop) > 0.05
+    called = []
+    monkeypatch.setenv("PANTO_OE_KERNEL", "0")
+    monkeypatch.setattr(output_error, "recursion_loop", lambda *a: called.append(1) or loop)
+    output_error._recursion(*arguments)
+    assert called
+
+
 def test_arx_start_and_oe_recover_a_linear_system():
     force = _force(2000, 5)
     data = _data(force, _oscillator(force), 6, noise=0.0)

@@ -20,13 +20,17 @@ simulated in free run from rest. The references ``u_ref``, ``y_ref`` are the tra
 ``tanh(v / v_s)`` or ``sign(v)`` of the simulated velocity ``v = (y~(t) - y~(t-1)) / T``
 (Coulomb friction) or ``1`` (operating-point offset). For the Silverbox (an electronic Duffing
 oscillator) this is exactly the polynomial OE model of Wigren & Schoukens (2013). The recursion
-needs ``n_k >= 1`` (no algebraic loop) and runs per sample in Python (about 2 us per sample).
+needs ``n_k >= 1`` (no algebraic loop) and runs per sample: compiled where a C compiler is at hand
+(:data:`RECURSION_SOURCE`, the same operations in the same order, so the same values bit for bit),
+else in Python (:func:`recursion_loop`, about 2 us per sample).
 
 Listed in :mod:`panto.identification.structures.registry` as the family ``linear-N`` (members
 ``linear-2``, ``linear-4``, ``linear-6`` shown; any order accepted; not in the comparison).
 """
 from __future__ import annotations
 
+import ctypes
+import functools
 import math
 import re
 from dataclasses import replace
@@ -34,6 +38,8 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 from scipy import signal as sps
+
+from panto.fmu_src import c_kernels
 
 from panto.identification.estimation.base import (IdentificationData, IdentificationError, IdentificationResult,
                                  ModelStructure)
@@ -201,9 +207,39 @@ class LinearOutputError(ModelStructure):
 
 def _recursion(f: list[float], b: list[float], other: list[float], drive: list[float],
                cubic: float, constant: float, friction: list[tuple[float, float]]) -> np.ndarray:
+    """:func:`recursion_loop` compiled (:data:`RECURSION_SOURCE`) where a C compiler is at hand
+    (``PANTO_OE_KERNEL=0`` runs the loop); the same values bit for bit."""
+    kernel = _recursion_kernel() if RECURSION_KERNEL.enabled() else None
+    if kernel is None or not drive:
+        return recursion_loop(f, b, other, drive, cubic, constant, friction)
+    n, m, count = len(f) - 1, len(b), len(drive)
+    fs = [(n - k, f[k]) for k in range(1, n + 1) if f[k] != 0.0]
+    bs = [(m - k, b[k]) for k in range(1, m) if b[k] != 0.0]
+    f_offset, f_value = _columns(fs, np.int64), _columns(fs, float, 1)
+    b_offset, b_value = _columns(bs, np.int64), _columns(bs, float, 1)
+    width = np.array([w for _, w in friction], float)
+    factor = np.array([c for c, _ in friction], float)
+    other_, drive_ = np.asarray(other, float), np.asarray(drive, float)
+    ys, ws = np.zeros(count + n), np.zeros(count + m)
+    kernel(count, n, m, len(fs), f_offset.ctypes.data, f_value.ctypes.data, len(bs),
+           b_offset.ctypes.data, b_value.ctypes.data, other_.ctypes.data, drive_.ctypes.data,
+           float(cubic), float(constant), len(friction), factor.ctypes.data, width.ctypes.data,
+           ys.ctypes.data, ws.ctypes.data)
+    return ys[n:]
+
+
+def _columns(pairs: list[tuple], dtype: Any, column: int = 0) -> np.ndarray:
+    """Column `column` of `pairs` as a contiguous array (one element at least, for ctypes)."""
+    return np.array([p[column] for p in pairs] or [0], dtype)
+
+
+def recursion_loop(f: list[float], b: list[float], other: list[float], drive: list[float],
+                   cubic: float, constant: float, friction: list[tuple[float, float]]
+                   ) -> np.ndarray:
     """``y(t) = other(t) - sum f_k y(t-k) + sum b_k w(t-k)``, ``w = u + c3 y^3 + c0 + friction``.
 
     `friction` holds ``(F_f, v_s T)``: ``F_f tanh(dy / (v_s T))`` (sign when ``v_s = 0``).
+    The reference of :data:`RECURSION_SOURCE`.
     """
     n, m, count = len(f) - 1, len(b), len(drive)
     fs = [(n - k, f[k]) for k in range(1, n + 1) if f[k] != 0.0]   # (index offset, coefficient)
@@ -227,6 +263,56 @@ def _recursion(f: list[float], b: list[float], other: list[float], drive: list[f
         ws[t + m] = w
     out = ys[n:]
     return np.asarray(out)
+
+
+#: :func:`recursion_loop` in C: every sum in the loop's order, no fused multiply-add
+#: (``-ffp-contract=off``), C's ``tanh`` (the one Python's ``math.tanh`` calls); a NaN velocity
+#: gives the sign 0 as in Python.
+RECURSION_SOURCE = """
+#include <math.h>
+void panto_oe_recursion(long count, long n, long m, long nf, const long *f_offset,
+                        const double *f_value, long nb, const long *b_offset,
+                        const double *b_value, const double *other, const double *drive,
+                        double cubic, double constant, long nfriction, const double *factor,
+                        const double *width, double *ys, double *ws) {
+    for (long t = 0; t < count; ++t) {
+        double y = other[t];
+        for (long k = 0; k < nf; ++k) y -= f_value[k] * ys[t + f_offset[k]];
+        for (long k = 0; k < nb; ++k) y += b_value[k] * ws[t + b_offset[k]];
+        double w = drive[t] + cubic * y * y * y + constant;
+        if (nfriction > 0) {
+            double dy = n ? y - ys[t + n - 1] : y;
+            for (long k = 0; k < nfriction; ++k) {
+                double shape;
+                if (width[k] > 0) shape = tanh(dy / width[k]);
+                else shape = dy > 0 ? 1.0 : (dy < 0 ? -1.0 : 0.0);
+                w += factor[k] * shape;
+            }
+        }
+        ys[t + n] = y;
+        ws[t + m] = w;
+    }
+}
+"""
+
+
+def _bind_recursion(library: ctypes.CDLL):
+    function = library.panto_oe_recursion
+    function.restype = None
+    function.argtypes = [ctypes.c_long] * 4 + [ctypes.c_void_p] * 2 + [ctypes.c_long] + \
+        [ctypes.c_void_p] * 4 + [ctypes.c_double] * 2 + [ctypes.c_long] + [ctypes.c_void_p] * 4
+    return function
+
+
+#: The recursion's library; ``PANTO_OE_KERNEL=0`` runs :func:`recursion_loop` instead.
+RECURSION_KERNEL = c_kernels.Kernel("oe_recursion", "PANTO_OE_KERNEL",
+                                    ("-std=c99", "-O2", "-ffp-contract=off"), RECURSION_SOURCE,
+                                    _bind_recursion)
+
+
+@functools.lru_cache(maxsize=1)
+def _recursion_kernel():
+    return RECURSION_KERNEL.load()
 
 
 def estimate_arx(data: IdentificationData, order: int, input_delay: int,
