@@ -187,6 +187,8 @@ def run_case(spec: effect_plants.CaseSpec, raw_options: Mapping[str, str],
                           options=diagnosis_options(raw_options),
                           progress=None if quiet else (lambda line: say(f"  {spec.name}: {line}")))
         record.update(verdict=result.verdict, effects=list(result.effects),
+                      alternatives={step.effect: list(step.alternatives)
+                                    for step in result.steps if step.alternatives},
                       fit_before=dict(result.fit_before), fit_after=dict(result.fit_after),
                       gap_closed=dict(result.gap_closed()), diagnosis_s=time.perf_counter() - begun,
                       gap_significant=bool(result.gap.get("significant")),
@@ -241,8 +243,13 @@ def score(record: dict) -> dict:
     before = record.get("fit_before") or {}
     record["nominal_left"] = {k: v - before[k] for k, v in (record.get("ceiling") or {}).items()
                               if k in before}
+    # the first name's equally supported alternatives (the diagnosis' "the runs cannot tell")
+    first = (record.get("alternatives") or {}).get(record["effects"][0], []) \
+        if record.get("effects") else []
     record.update(outcome=outcome, expected=EXPECTED[record["label"]],
                   correct=outcome == EXPECTED[record["label"]],
+                  correct_or_tied=outcome == EXPECTED[record["label"]]
+                  or (record["verdict"] == "effect" and EXPECTED[record["label"]] in first),
                   strong=record.get("strongest", 0.0) >= STRONG, main_output=main,
                   gap_closed_main=closed,
                   effect_gap_closed_main=effect_gap_closed(
@@ -261,8 +268,8 @@ def say(message: str, quiet: bool = False) -> None:
 
 # --- summary ----------------------------------------------------------------------------------
 
-def _share(records: list[dict]) -> dict:
-    right = sum(1 for r in records if r["correct"])
+def _share(records: list[dict], key: str = "correct") -> dict:
+    right = sum(1 for r in records if r.get(key))
     return {"right": right, "cases": len(records),
             "share": right / len(records) if records else None}
 
@@ -284,6 +291,9 @@ def summarise(records: list[dict]) -> dict:
         "library_top1_strong_reproducible": _share([r for r in library if r["strong"]
                                                     and r.get("reproducible", True)]),
         "library_top1_all": _share(library),
+        "library_top1_or_tied_strong": _share([r for r in library if r["strong"]],
+                                              "correct_or_tied"),
+        "library_top1_or_tied_all": _share(library, "correct_or_tied"),
         "library_top1_unabsorbable": _share([r for r in library if r.get("unabsorbable")]),
         "library_top1_absorbable": _share([r for r in library if r["strong"]
                                            and not r.get("unabsorbable")]),
@@ -354,6 +364,10 @@ def markdown(report: dict) -> str:
              "| score | strong | weak | all |", "|---|---|---|---|",
              f"| top-1 name, library effects | {_cell(s['library_top1_strong'])} | "
              f"{_cell(s['library_top1_weak'])} | {_cell(s['library_top1_all'])} |",
+             f"| top-1 name, or the first name's equally supported alternative (\"the runs "
+             f"cannot tell A from B\"; not the issue's score) | "
+             f"{_cell(s.get('library_top1_or_tied_strong', _share([])))} | | "
+             f"{_cell(s.get('library_top1_or_tied_all', _share([])))} |",
              f"| `unexplained`, out-of-library | {_cell(s['out_of_library_unexplained_strong'])} | "
              f"{_cell(s['out_of_library_unexplained_weak'])} | "
              f"{_cell(s['out_of_library_unexplained_all'])} |",
@@ -406,7 +420,9 @@ def markdown(report: dict) -> str:
         left = ", ".join(f"{k} {v:.1f}" for k, v in (r.get("nominal_left") or {}).items())
         kept = ", ".join(f"{k} {v:.1f}" for k, v in (r.get("unabsorbed") or {}).items())
         outcome = r.get("error", r["outcome"]) if r["outcome"] == "error" else \
-            ", ".join(r.get("effects") or []) or r["outcome"]
+            ", ".join(e + (f" (or {' or '.join(a)})" if (a := (r.get("alternatives") or {})
+                                                            .get(e)) else "")
+                      for e in r.get("effects") or []) or r["outcome"]
         lines.append(f"| {r['name']} | {r['excitation']} | {r['rate']:g} | {r['duration']:g} | "
                      f"{r['inputs']} | {', '.join(r['outputs'])} | {r['snr_db']:.0f} | "
                      f"{r['strength']:.2f} | {detect} | {kept or '-'} | {left or '-'} | "

@@ -236,6 +236,26 @@ def test_scores_follow_the_labels(harness):
     assert right["correct"] and right["gap_closed_main"] == 0.9 and right["strong"]
 
 
+def test_a_tie_the_diagnosis_states_counts_only_in_its_own_score(harness):
+    """"The runs cannot tell input_delay from actuator_lag" for a lag: wrong on top-1, right on
+    the side score; an alternative of a later name or of an unexplained verdict counts in
+    neither."""
+    base = {"strongest": 5.0, "gap_closed": {"F_c": 0.9}, "detectability": {"F_c": 5.0},
+            "label": "actuator_lag", "verdict": "effect"}
+    tied = harness.score({**base, "effects": ["input_delay"],
+                          "alternatives": {"input_delay": ["actuator_lag"]}})
+    assert not tied["correct"] and tied["correct_or_tied"]
+    later = harness.score({**base, "effects": ["input_delay", "offset"],
+                           "alternatives": {"offset": ["actuator_lag"]}})
+    assert not later["correct"] and not later["correct_or_tied"]
+    unexplained = harness.score({**base, "verdict": "unexplained", "effects": [],
+                                 "alternatives": {"input_delay": ["actuator_lag"]}})
+    assert not unexplained["correct_or_tied"]
+    summary = harness.summarise([tied, later])
+    assert summary["library_top1_strong"]["right"] == 0
+    assert summary["library_top1_or_tied_strong"] == {"right": 1, "cases": 2, "share": 0.5}
+
+
 def test_out_of_library_scores_are_also_given_over_the_unabsorbable_cases(harness):
     """A creep a refitted nominal absorbs (unabsorbed 0) answered ``none`` counts against the
     strong out-of-library score but not against the unabsorbable one, as for library effects."""
