@@ -249,7 +249,7 @@ def score(record: dict) -> dict:
     record.update(outcome=outcome, expected=EXPECTED[record["label"]],
                   correct=outcome == EXPECTED[record["label"]],
                   correct_or_tied=outcome == EXPECTED[record["label"]]
-                  or (record["verdict"] == "effect" and EXPECTED[record["label"]] in first),
+                  or (record.get("verdict") == "effect" and EXPECTED[record["label"]] in first),
                   strong=record.get("strongest", 0.0) >= STRONG, main_output=main,
                   gap_closed_main=closed,
                   effect_gap_closed_main=effect_gap_closed(

@@ -251,6 +251,9 @@ def test_a_tie_the_diagnosis_states_counts_only_in_its_own_score(harness):
     unexplained = harness.score({**base, "verdict": "unexplained", "effects": [],
                                  "alternatives": {"input_delay": ["actuator_lag"]}})
     assert not unexplained["correct_or_tied"]
+    failed = harness.score({**{k: v for k, v in base.items() if k != "verdict"},
+                            "error": "RuntimeError: no static equilibrium"})  # a failed case
+    assert failed["outcome"] == "error" and not failed["correct_or_tied"]
     summary = harness.summarise([tied, later])
     assert summary["library_top1_strong"]["right"] == 0
     assert summary["library_top1_or_tied_strong"] == {"right": 1, "cases": 2, "share": 0.5}
