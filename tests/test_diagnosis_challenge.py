@@ -291,11 +291,14 @@ def _read_through(seed: int, reading) -> IdentificationData:
 def test_a_clip_of_the_output_is_no_challenger_and_a_fold_is():
     """A kink of the output's own simulation ``s + theta (|s - c| - s)`` refitted with theta
     near 1/2 flattens the output below ``c``: a clip (a head leaving the wire), which the
-    vocabulary's contact loss and saturation model, not a sensor outside it; near 1 it folds
-    the output (a sign-blind sensor). The same plant read through each, level -1: the fold is
-    the challenge's hypothesis (theta near 1), the clip's kink is refitted (theta near 1/2) and
-    not chosen."""
-    readings = {"clip": lambda y: np.maximum(y, -1.0), "fold": lambda y: -1.0 + np.abs(y + 1.0)}
+    vocabulary's contact loss and saturation model on the contact force, not a sensor outside
+    it; near 1 it folds the output (a sign-blind sensor). The same plant read through each, level
+    -1, its output taken as one the vocabulary clips (as the force): the fold is the challenge's
+    hypothesis (theta near 1), the clip's kink is refitted (theta near 1/2) and not chosen. On
+    an output the vocabulary cannot clip (a position, a generic output: ``clippable`` without
+    it) the clip is outside the vocabulary too, and its kink is the hypothesis."""
+    readings = {"clip": lambda y: np.maximum(y, -1.0), "fold": lambda y: -1.0 + np.abs(y + 1.0),
+                "clip, not clippable": lambda y: np.maximum(y, -1.0)}
     found, lines = {}, {}
     for name, reading in readings.items():
         train, validation = _read_through(1, reading), _read_through(2, reading)
@@ -306,7 +309,8 @@ def test_a_clip_of_the_output_is_no_challenger_and_a_fold_is():
         before = _nominal_fit(model, validation)
         lines[name] = []
         found[name] = challenge(model, train, validation, {"y": before}, {"y": before + 0.3},
-                                None, lines[name].append)
+                                None, lines[name].append,
+                                clippable=() if "not clippable" in name else ("y",))
     fold = found["fold"]
     assert fold is not None and fold["families"][0] == "abs" and fold["coefficients"][0] > 0.75
     assert found["clip"] is None or "abs" not in found["clip"]["families"], found["clip"]
@@ -314,6 +318,9 @@ def test_a_clip_of_the_output_is_no_challenger_and_a_fold_is():
     assert refused, lines["clip"]
     theta = float(refused[0].split("coefficient ")[1].split(" ")[0])
     assert 0.4 < theta < 0.6, refused[0]
+    kept = found["clip, not clippable"]
+    assert kept is not None and kept["families"][0] == "abs", lines["clip, not clippable"]
+    assert 0.4 < kept["coefficients"][0] < 0.6, kept
 
 
 def test_a_clip_is_read_from_the_slope_below_every_kink():

@@ -12,6 +12,7 @@ effect does on any output, they are withdrawn (:func:`withdraw`,
 """
 from __future__ import annotations
 
+import functools
 import math
 import pickle
 from concurrent.futures import BrokenExecutor
@@ -80,8 +81,9 @@ def challenger(term: Any, output: str) -> bool:
                                                      x.role == "input")
 
 
-def a_clip(hypothesis: Any) -> str | None:
-    """Why a refitted challenger is no evidence outside the vocabulary: its kinks make a clip.
+def a_clip(hypothesis: Any, clippable: Sequence[str] | None = None) -> str | None:
+    """Why a refitted challenger is no evidence outside the vocabulary: its kinks make a clip of
+    an output the vocabulary clips (`clippable`, None: any output).
     A kink of the output's own simulation ``s + theta (|s - c| - s)`` (the only kinks
     :func:`challenger` admits) keeps the slope 1 above ``c`` and has ``1 - 2 theta`` below it:
     ``theta = 1`` folds the output (a sign-blind sensor, outside the vocabulary), ``theta = 1/2``
@@ -90,8 +92,16 @@ def a_clip(hypothesis: Any) -> str | None:
     With two kinks the slope below both is ``1 - 2 (theta_1 + theta_2)``. A slope there nearer
     the clip's 0 than the fold's -1 or the line's 1 (between -1/2 and 1/2) is a clip (seen
     held-out two-mass/contact_loss/3788 and three-mass/contact_loss/4103, flying heads: ``theta``
-    0.51 and 0.49 on the force; the sign-blind sensors 3477 and 3762: 0.89 and 0.95). None when
-    the kinks make no clip (or there is none)."""
+    0.51 and 0.49 on the force; the sign-blind sensors 3477 and 3762: 0.89 and 0.95). Only the
+    contact force is such an output: the vocabulary's saturation clips an actuator input or the
+    force (:func:`~panto.identification.diagnosis.effects.build_candidate_regressors`), its contact
+    loss the force, and nothing in it clips a position or a generic output, so a clip there is as
+    much outside the vocabulary as a fold (seen held-out two-mass/sign_blind_sensor/6522: a fold
+    of y_cb refitted to theta 0.64, 44.0 -> 83.2 % on y_cb, was refused as a clip and a cubic
+    spring was named at 63.2 %). None when the kinks make no clip of such an output (or there is
+    none)."""
+    if clippable is not None and hypothesis.output not in clippable:
+        return None
     thetas = [t for family, t in zip(hypothesis.families, hypothesis.coefficients)
               if family == "abs"]
     slope = 1.0 - 2.0 * sum(thetas)
@@ -176,7 +186,8 @@ def yielded_summary(withdrawn: Sequence[str], winner: Mapping[str, Any],
 def challenge(nominal: Model, train: IdentificationData, validation: IdentificationData,
               fit_before: Mapping[str, float], fit_after: Mapping[str, float], executor: Any,
               progress: Progress | None, pool: Any = None,
-              max_evaluations: int | None = None) -> dict[str, Any] | None:
+              max_evaluations: int | None = None, clippable: Sequence[str] | None = None
+              ) -> dict[str, Any] | None:
     """The best out-of-vocabulary term (:func:`challenger`) refitted in the nominal, when it gains
     more validation fit points on its output than the first accepted effect gains on any output
     (`fit_after`: the model after that effect alone;
@@ -194,7 +205,8 @@ def challenge(nominal: Model, train: IdentificationData, validation: Identificat
     refitted). The single-term refits run side by side on `pool`, each with
     `max_evaluations` simulations (the candidates' budget,
     :attr:`~panto.identification.diagnosis.pipeline.DiagnosisOptions.max_evaluations`: the same
-    competition; None: the discovery's)."""
+    competition; None: the discovery's). `clippable`: the outputs the vocabulary clips, whose
+    clip-shaped kinks are refused (:func:`a_clip`; None: every output's)."""
     from panto.identification.diagnosis.discovery import DiscoveryOptions, discover
 
     gained = max(fit_after[o] - fit_before[o] for o in fit_before)
@@ -214,7 +226,9 @@ def challenge(nominal: Model, train: IdentificationData, validation: Identificat
         # is given (the largest training gain), which need not be the one gaining most withheld
         for output in open_outputs:
             found.append(discover(nominal.structure, nominal.parameters, nominal.free, train,
-                                  validation, options=DiscoveryOptions(**budget, **CHALLENGE),
+                                  validation, options=DiscoveryOptions(**budget, **{
+                                      **CHALLENGE, "refuse": functools.partial(
+                                          a_clip, clippable=clippable)}),
                                   executor=executor, progress=indented(progress), pool=pool,
                                   outputs=[output]))
     except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError,
