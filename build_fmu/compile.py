@@ -12,6 +12,7 @@ builds the host's library only.
 """
 from __future__ import annotations
 
+import hashlib
 import importlib.util
 import logging
 import os
@@ -156,7 +157,6 @@ def compile_library(sources: Path, output: Path, *, zig_target: str | None = Non
         is given and ziglang is not installed).
     """
     output.parent.mkdir(parents=True, exist_ok=True)
-    c_files = sorted(str(path.resolve()) for path in sources.glob("*.c"))
     if zig_target is None:
         compiler = [find_compiler(), *COMPILER_FLAGS]
     else:
@@ -164,6 +164,8 @@ def compile_library(sources: Path, output: Path, *, zig_target: str | None = Non
         if zig is None:
             raise CompilationError("ziglang is not installed (pip install ziglang)")
         compiler = [*zig, "cc", "-target", zig_target, *COMPILER_FLAGS, *ZIG_FLAGS]
+        sources = content_addressed(sources)
+    c_files = sorted(str(path.resolve()) for path in sources.glob("*.c"))
     with tempfile.TemporaryDirectory(prefix="cc_") as scratch:  # side files (.pdb, .lib) stay
         built = Path(scratch) / output.name
         command = [*compiler, "-I", str(sources.resolve()), "-o", str(built), *c_files, "-lm"]
@@ -179,6 +181,42 @@ def compile_library(sources: Path, output: Path, *, zig_target: str | None = Non
     if result.stderr.strip():
         LOGGER.warning("compiler warnings for %s:\n%s", output.name, result.stderr)
     return output
+
+
+#: Folder (under the system's temporary folder) of the sources' content-addressed copies.
+SOURCE_COPIES = "panto-fmu-sources"
+
+
+def content_addressed(sources: Path) -> Path:
+    """The files of `sources` in a folder named by their names and bytes, written once and
+    never touched again: ``zig cc`` keys its cache on the input files' paths and reuses a
+    build only for files it has seen unchanged there, so the same FMU sources compiled again
+    (from another FMU's fresh ``sources/`` folder) take its cached library, the same bytes,
+    instead of a new compilation (about 0.6 s of CPU for a small model). `sources` itself where
+    the copy cannot be written (a read-only temporary folder, another user's folder)."""
+    files = sorted(path for path in sources.iterdir() if path.is_file())
+    digest = hashlib.sha256()
+    for path in files:
+        data = path.read_bytes()
+        digest.update(f"{path.name}\0{len(data)}\0".encode())
+        digest.update(data)
+    root = Path(tempfile.gettempdir()) / SOURCE_COPIES
+    target = root / digest.hexdigest()[:32]
+    if target.is_dir():
+        return target
+    try:
+        root.mkdir(exist_ok=True)
+        scratch = Path(tempfile.mkdtemp(prefix=".part_", dir=root))
+        for path in files:
+            shutil.copyfile(path, scratch / path.name)
+        try:
+            scratch.rename(target)  # whole or not at all; another process may have won
+        except OSError:
+            shutil.rmtree(scratch, ignore_errors=True)
+    except OSError as error:
+        LOGGER.debug("no content-addressed copy of %s (%s): compiling in place", sources, error)
+        return sources
+    return target if target.is_dir() else sources
 
 
 @dataclass(frozen=True)
