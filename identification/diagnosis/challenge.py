@@ -221,16 +221,15 @@ def challenge(nominal: Model, train: IdentificationData, validation: Identificat
                      if open_outputs else "no output leaves a term room to gain more"))
     if not open_outputs:
         return None
+    options = DiscoveryOptions(**{**CHALLENGE, **budget,
+                                  "refuse": functools.partial(a_clip, clippable=clippable)})
     found = []
     try:  # each output searched on its own: the discovery keeps one term across the outputs it
         # is given (the largest training gain), which need not be the one gaining most withheld
         for output in open_outputs:
             found.append(discover(nominal.structure, nominal.parameters, nominal.free, train,
-                                  validation, options=DiscoveryOptions(**budget, **{
-                                      **CHALLENGE, "refuse": functools.partial(
-                                          a_clip, clippable=clippable)}),
-                                  executor=executor, progress=indented(progress), pool=pool,
-                                  outputs=[output]))
+                                  validation, options=options, executor=executor,
+                                  progress=indented(progress), pool=pool, outputs=[output]))
     except (IdentificationError, ValueError, ArithmeticError, np.linalg.LinAlgError,
             BrokenExecutor, pickle.PicklingError) as error:  # an optional check: never fatal
         if progress:

@@ -418,7 +418,7 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
         fit_after = fit_per_output(validation, current)
         challenger = challenge(nominal_model, train, validation, fit_before, steps[0].fit_after,
                                executor, progress, pool, options.max_evaluations,
-                               clippable=[o for o in (roles.force,) if o is not None]) \
+                               clippable=[roles.force] if roles.force else []) \
             if options.challenge and steps and comparable(steps, say) and challengeable(
                 adequacy or adequacy_quietly(nominal, result, train), say) else None
     partial = lesser_part(steps, fit_before, fit_after, remaining_gap) \
