@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Callable, Iterator
 
 from panto import console
+from panto.fmu_src.frame_stack import keep_stack_chunks
 from panto.console import progress, say
 from panto.data_options import UsageError, non_negative_float
 
@@ -220,6 +221,7 @@ _COMMAND_MODULES = ("panto.commands_cosim", "panto.commands_rig", "panto.command
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``panto`` console script: the exit code (:data:`EXIT_CODES`)."""
+    keep_stack_chunks()  # every command's loops without CPython 3.11's chunk thrashing
     parser, handlers = _parser()
     try:
         args = parser.parse_args(argv)

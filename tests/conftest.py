@@ -12,11 +12,18 @@ from pathlib import Path
 
 import pytest
 
+from panto.fmu_src.frame_stack import keep_stack_chunks
+
 if os.environ.get("PYTEST_XDIST_WORKER") is not None:
     # each xdist worker already takes one core: a diagnosis' default process pool of every CPU
     # (panto.identification.diagnosis.parallel.resolve_workers) would oversubscribe them; tests
     # that ask for workers explicitly still get their pool
     os.environ.setdefault("PANTO_WORKERS", "1")
+
+# every test's loops without CPython 3.11's frame-stack chunk thrashing (as the command line and
+# the diagnosis run; panto.fmu_src.frame_stack): the tests' deeper stacks would otherwise put a
+# hot loop on a chunk boundary where a user's run has none
+keep_stack_chunks()
 
 
 def _shared_folder(tmp_path_factory: pytest.TempPathFactory, name: str) -> Path:

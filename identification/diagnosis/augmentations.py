@@ -446,7 +446,8 @@ class AugmentedStructure(ModelStructure):
             raise NotImplementedError(f"{self.name}: {self.base.name} gives no linear system")
         inner = {k: v for k, v in parameters.items() if k not in self._bounds}
         name = self.effect_input
-        lag = float({**self._starts, **parameters}[f"actuator_lag:{name}"])
+        key = f"actuator_lag:{name}"
+        lag = float(parameters[key] if key in parameters else self._starts[key])
         a, b, c, d = (np.array(m, float) for m in self.base.linear_system(inner, data))
         if not lag > 1e-6 * data.sample_period:
             return a, b, c, d

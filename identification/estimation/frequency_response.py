@@ -226,8 +226,11 @@ def modal_frequency_responses(systems: Sequence[Sequence[np.ndarray]], frequency
 
 
 def _matrices(system: Sequence[np.ndarray]) -> tuple[np.ndarray, ...]:
-    """``(A, B, C, D)`` as two-dimensional float arrays."""
-    return tuple(np.atleast_2d(np.asarray(x, float)) for x in system)
+    """``(A, B, C, D)`` as two-dimensional float arrays (a matrix that is one already is
+    returned itself, as ``np.atleast_2d(np.asarray(x, float))`` returns it, without their cost:
+    this runs for every column of the frequency mapping's Jacobians)."""
+    return tuple(x if type(x) is np.ndarray and x.ndim == 2 and x.dtype == np.float64
+                 else np.atleast_2d(np.asarray(x, float)) for x in system)
 
 
 def _modal_responses(lam: np.ndarray, vectors: np.ndarray, b: np.ndarray, c: np.ndarray,

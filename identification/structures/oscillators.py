@@ -213,29 +213,29 @@ class OscillatorStructure(ModelStructure):
         """
         v = self.values(parameters)
         n = self.masses
-        mass = np.array([v[f"m{i + 1}"] for i in range(n)])
-        stiffness = self._chain([v[f"k{i + 1}"] for i in range(n)])
-        damping = self._chain([v[f"c{i + 1}"] for i in range(n)])
+        mass = [v[f"m{i + 1}"] for i in range(n)]
+        stiffness = _chain_rows([v[f"k{i + 1}"] for i in range(n)])
+        damping = _chain_rows([v[f"c{i + 1}"] for i in range(n)])
         k_e, y_0 = v["k_E"], v["y_0"]
-        stiffness[-1, -1] += k_e
-        forcing = np.zeros((n, 3))
-        forcing[-1, 0] = k_e
-        forcing[0, 1] = v["p_gain"]
-        forcing[0, 2] = v["F_0"]
-        forcing[-1, 2] -= k_e * y_0
-        # assembled in place (``np.block``/``vstack`` cost more than the arithmetic: this runs
-        # for every column of the frequency mapping's Jacobians)
-        a = np.zeros((2 * n, 2 * n))
-        a[:n, n:] = np.eye(n)
-        a[n:, :n] = -stiffness / mass[:, None]
-        a[n:, n:] = -damping / mass[:, None]
-        b = np.zeros((2 * n, 3))
-        b[n:] = forcing / mass[:, None]
-        c = np.zeros((3, 2 * n))
-        c[0, n - 2] = c[1, n - 1] = 1.0
-        c[2, n - 1] = k_e
-        d = np.array([[0.0, 0.0, y_0 + v["y_cb_offset"]], [0.0, 0.0, y_0], [-k_e, 0.0, k_e * y_0]])
-        return a, b, c, d
+        stiffness[-1][-1] += k_e
+        forcing = [[0.0] * 3 for _ in range(n)]
+        forcing[-1][0] = k_e
+        forcing[0][1] = v["p_gain"]
+        forcing[0][2] = v["F_0"]
+        forcing[-1][2] -= k_e * y_0
+        # assembled from Python floats, one array per matrix (numpy's small-array operations
+        # cost more than the arithmetic: this runs for every column of the frequency mapping's
+        # Jacobians); every entry is the same IEEE operation as the matrix form's, ``-K / m``
+        # and ``-C / m`` row by row
+        a = [[float(j == n + i) for j in range(2 * n)] for i in range(n)]
+        a += [[-s / mass[i] for s in stiffness[i]] + [-c / mass[i] for c in damping[i]]
+              for i in range(n)]
+        b = [[0.0] * 3 for _ in range(n)] + [[f / mass[i] for f in forcing[i]] for i in range(n)]
+        c = [[0.0] * (2 * n) for _ in range(3)]
+        c[0][n - 2] = c[1][n - 1] = 1.0
+        c[2][n - 1] = k_e
+        d = [[0.0, 0.0, y_0 + v["y_cb_offset"]], [0.0, 0.0, y_0], [-k_e, 0.0, k_e * y_0]]
+        return np.array(a), np.array(b), np.array(c), np.array(d)
 
     def linear_system(self, parameters: Mapping[str, float], data: IdentificationData
                       ) -> tuple[np.ndarray, ...]:
@@ -248,10 +248,11 @@ class OscillatorStructure(ModelStructure):
         if self.friction:
             raise NotImplementedError(f"{self.name}: Coulomb friction is not linear")
         a, b, c, d = self.matrices(parameters)
-        c, d = self._with_accelerations(a, b, c, d)
         inputs = [self._position(INPUT_NAMES, n, "input") for n in data.input_names]
         rows = [self._position(OUTPUT_NAMES + ACCELERATIONS, n, "output")
                 for n in data.output_names]
+        if any(row >= len(OUTPUT_NAMES) for row in rows):
+            c, d = self._with_accelerations(a, b, c, d)
         return a, b[:, inputs], c[rows], d[rows][:, inputs]
 
     def _with_accelerations(self, a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray
@@ -341,6 +342,20 @@ class OscillatorStructure(ModelStructure):
         if not np.all(np.isfinite(y)):
             raise IdentificationError(f"{self.name}: simulation diverged for {dict(v)}")
         return y
+
+
+def _chain_rows(values: Sequence[float]) -> list[list[float]]:
+    """:meth:`OscillatorStructure._chain` as nested lists of Python floats (the same
+    operations in the same order)."""
+    n = len(values)
+    out = [[0.0] * n for _ in range(n)]
+    out[0][0] = values[0]
+    for i in range(1, n):
+        out[i][i] += values[i]
+        out[i - 1][i - 1] += values[i]
+        out[i][i - 1] -= values[i]
+        out[i - 1][i] -= values[i]
+    return out
 
 
 def discretise(a: np.ndarray, b: np.ndarray, period: float,

@@ -1,0 +1,120 @@
+"""Keep CPython 3.11/3.12 from mapping and unmapping a frame-stack chunk on every call of a hot
+loop.
+
+CPython 3.11 keeps its Python frames on a stack of 16 KiB chunks. When a call needs more room
+than the current chunk has, a new chunk is mapped (``mmap``); when the frame at its base returns,
+the chunk is unmapped (``munmap``). A loop that calls a function whose frame falls exactly on a
+chunk boundary therefore maps and unmaps 16 KiB on every call (CPython issue gh-142183, "Calls
+across stack chunks perform badly"; fixed by caching one chunk in 3.13 and 3.14 patch releases of
+March 2026, not in 3.11 or 3.12). Where the boundary falls depends on how deep the caller's stack
+is, so one diagnosis can run clean from the command line and thrash under pytest. Measured here
+(session 52): one diagnosis test made 250 000 ``mmap``/``munmap`` pairs, 2.0 s of its 20 s as
+system time; with :func:`keep_stack_chunks` 0.17 s.
+
+:func:`keep_stack_chunks` installs an arena allocator (``PyObject_SetArenaAllocator``, the
+documented hook for the memory CPython's small-object allocator and frame stack take from the
+system) that keeps up to :data:`KEPT` freed blocks of at most :data:`LARGEST` bytes and hands
+them out again for a request of the same size; every other request goes to the allocator it
+replaces (CPython's ``mmap``/``munmap``). The blocks hold frames and small objects only, never
+results: values are unchanged. It is a C kernel of :mod:`panto.fmu_src.c_kernels` (built on first
+use, cached); without a compiler, on another Python version, or with ``PANTO_KEEP_STACK_CHUNKS=0``
+nothing is installed and everything runs as before, slower where a loop thrashes.
+"""
+from __future__ import annotations
+
+import ctypes
+import sys
+
+from panto.fmu_src import c_kernels
+
+#: Environment variable: ``0`` leaves CPython's arena allocator as it is.
+SWITCH_VARIABLE = "PANTO_KEEP_STACK_CHUNKS"
+#: Freed blocks kept for reuse at most (a frame-stack chunk is 16 KiB: at most 512 KiB kept).
+KEPT = 32
+#: Largest block kept [bytes] (the small-object allocator's arenas, 1 MiB, always go back).
+LARGEST = 65536
+
+SOURCE = f"""
+#include <stddef.h>
+
+typedef struct {{
+    void *ctx;
+    void *(*alloc)(void *ctx, size_t size);
+    void (*free)(void *ctx, void *ptr, size_t size);
+}} Arena;
+
+extern void PyObject_GetArenaAllocator(Arena *allocator);
+extern void PyObject_SetArenaAllocator(Arena *allocator);
+
+static Arena previous;
+static void *kept[{KEPT}];
+static size_t kept_size[{KEPT}];
+static int count, installed;
+
+/* Called with the GIL held, as every arena allocation of CPython 3.11 and 3.12. */
+static void *take(void *ctx, size_t size) {{
+    for (int i = count - 1; i >= 0; --i) {{
+        if (kept_size[i] == size) {{
+            void *block = kept[i];
+            --count;
+            kept[i] = kept[count];
+            kept_size[i] = kept_size[count];
+            return block;
+        }}
+    }}
+    return previous.alloc(previous.ctx, size);
+}}
+
+static void give(void *ctx, void *block, size_t size) {{
+    if (size <= {LARGEST} && count < {KEPT}) {{
+        kept[count] = block;
+        kept_size[count] = size;
+        ++count;
+        return;
+    }}
+    previous.free(previous.ctx, block, size);
+}}
+
+int panto_keep_stack_chunks(void) {{
+    if (!installed) {{
+        Arena mine = {{NULL, take, give}};
+        PyObject_GetArenaAllocator(&previous);
+        PyObject_SetArenaAllocator(&mine);
+        installed = 1;
+    }}
+    return count;
+}}
+"""
+
+
+def _bind(library: ctypes.CDLL):
+    function = library.panto_keep_stack_chunks
+    function.restype = ctypes.c_int
+    function.argtypes = []
+    return function
+
+
+#: The allocator's library (built on first use into the kernel cache).
+KERNEL = c_kernels.Kernel("keep_stack_chunks", SWITCH_VARIABLE, ("-O2",), SOURCE, _bind)
+
+_state = {"installed": False}
+
+
+def keep_stack_chunks() -> bool:
+    """Install the arena allocator in this process (module notes), once; True when it is in
+    place. Only on CPython 3.11 and 3.12 (where the chunks are not cached), not under a
+    switched-off :data:`SWITCH_VARIABLE`, and only where the library builds."""
+    if _state["installed"]:
+        return True
+    if sys.implementation.name != "cpython" or sys.version_info[:2] not in ((3, 11), (3, 12)) \
+            or not KERNEL.enabled():
+        return False
+    install = KERNEL.load()
+    if install is None:
+        return False
+    install()
+    _state["installed"] = True
+    return True
+
+
+__all__ = ["keep_stack_chunks", "SWITCH_VARIABLE", "KEPT", "LARGEST"]
