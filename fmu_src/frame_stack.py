@@ -15,8 +15,9 @@ system time; with :func:`keep_stack_chunks` 0.17 s.
 documented hook for the memory CPython's small-object allocator and frame stack take from the
 system) that keeps up to :data:`KEPT` freed blocks of at most :data:`LARGEST` bytes and hands
 them out again for a request of the same size; every other request goes to the allocator it
-replaces (CPython's ``mmap``/``munmap``). The blocks hold frames and small objects only, never
-results: values are unchanged. It is a C kernel of :mod:`panto.fmu_src.c_kernels` (built on first
+replaces (CPython's ``mmap``/``munmap``). The kept blocks are guarded by a lock of their own
+(CPython may free a thread state's frame stack without the GIL). The blocks hold frames and small
+objects only, never results: values are unchanged. It is a C kernel of :mod:`panto.fmu_src.c_kernels` (built on first
 use, cached); without a compiler, on another Python version, or with ``PANTO_KEEP_STACK_CHUNKS=0``
 nothing is installed and everything runs as before, slower where a loop thrashes.
 """
@@ -35,6 +36,7 @@ KEPT = 32
 LARGEST = 65536
 
 SOURCE = f"""
+#include <pthread.h>
 #include <stddef.h>
 
 typedef struct {{
@@ -50,29 +52,38 @@ static Arena previous;
 static void *kept[{KEPT}];
 static size_t kept_size[{KEPT}];
 static int count, installed;
+/* CPython allocates arenas with the GIL held, but may free a thread state's frame stack without
+   it (PyThreadState_Delete): the kept blocks are guarded by their own lock. */
+static pthread_mutex_t lock = PTHREAD_MUTEX_INITIALIZER;
 
-/* Called with the GIL held, as every arena allocation of CPython 3.11 and 3.12. */
 static void *take(void *ctx, size_t size) {{
+    void *block = NULL;
+    pthread_mutex_lock(&lock);
     for (int i = count - 1; i >= 0; --i) {{
         if (kept_size[i] == size) {{
-            void *block = kept[i];
+            block = kept[i];
             --count;
             kept[i] = kept[count];
             kept_size[i] = kept_size[count];
-            return block;
+            break;
         }}
     }}
-    return previous.alloc(previous.ctx, size);
+    pthread_mutex_unlock(&lock);
+    return block != NULL ? block : previous.alloc(previous.ctx, size);
 }}
 
 static void give(void *ctx, void *block, size_t size) {{
+    int keep = 0;
+    pthread_mutex_lock(&lock);
     if (size <= {LARGEST} && count < {KEPT}) {{
         kept[count] = block;
         kept_size[count] = size;
         ++count;
-        return;
+        keep = 1;
     }}
-    previous.free(previous.ctx, block, size);
+    pthread_mutex_unlock(&lock);
+    if (!keep)
+        previous.free(previous.ctx, block, size);
 }}
 
 int panto_keep_stack_chunks(void) {{
@@ -95,7 +106,8 @@ def _bind(library: ctypes.CDLL):
 
 
 #: The allocator's library (built on first use into the kernel cache).
-KERNEL = c_kernels.Kernel("keep_stack_chunks", SWITCH_VARIABLE, ("-O2",), SOURCE, _bind)
+KERNEL = c_kernels.Kernel("keep_stack_chunks", SWITCH_VARIABLE, ("-O2", "-pthread"), SOURCE,
+                          _bind)
 
 _state = {"installed": False}
 
