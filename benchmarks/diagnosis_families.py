@@ -165,8 +165,10 @@ def unabsorbed(case: effect_plants.EffectCase) -> dict[str, float]:
 def run_case(spec: effect_plants.CaseSpec, raw_options: Mapping[str, str],
              quiet: bool = False) -> dict:
     """Simulate and diagnose one case; the record of :func:`score` (an ``error`` on failure)."""
+    from panto.fmu_src.frame_stack import keep_stack_chunks
     from panto.identification.diagnosis.pipeline import diagnose
 
+    keep_stack_chunks()  # this program's processes, as the command line's (its module notes)
     started = time.perf_counter()
     record: dict[str, Any] = {"name": spec.name, "split": split_of(spec.family, spec.seed),
                               **dataclasses.asdict(spec)}

@@ -11,8 +11,9 @@ and unmaps a 16 KiB chunk on every call that crosses a chunk boundary) or unset 
 :func:`panto.fmu_src.frame_stack.keep_stack_chunks`, installed by the tests' conftest). The cases
 alternate (off, on, on, off, ...) so that a change in the machine's other work falls on both.
 Per case the children's CPU time (user and system, from ``resource.getrusage``), the wall time
-and pytest's outcome; the ratio off / on of the medians. Both must pass the same tests: the
-allocator changes where frames live, never a value.
+and pytest's outcome; the ratio off / on of the medians. Both must pass the same tests (the
+allocator changes where frames live, never a value; the comparison is of pytest's counts, the
+tests' own assertions check the values): exit status 1 otherwise.
 """
 from __future__ import annotations
 
@@ -58,6 +59,8 @@ def main() -> int:
     parser.add_argument("tests", nargs="*", default=list(DEFAULT_TESTS))
     parser.add_argument("--repeat", type=int, default=2, help="pairs of cases (default 2)")
     args = parser.parse_args()
+    if args.repeat < 1:
+        parser.error(f"--repeat {args.repeat}: at least 1 pair of cases")
     order = [False, True, True, False] * ((args.repeat + 1) // 2)
     order = order[:2 * args.repeat]
     cases = []
@@ -100,7 +103,8 @@ Same pytest outcome in every case: {record['same_outcome']}.
 {outcomes}
 """)
     print(json.dumps(summary), file=sys.stderr)
-    return 0
+    # 1 when a case failed or the cases' outcomes differ (the allocator must change no result)
+    return 0 if record["same_outcome"] and all(c["returncode"] == 0 for c in cases) else 1
 
 
 if __name__ == "__main__":

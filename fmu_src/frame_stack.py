@@ -13,26 +13,37 @@ system time; with :func:`keep_stack_chunks` 0.17 s.
 
 :func:`keep_stack_chunks` installs an arena allocator (``PyObject_SetArenaAllocator``, the
 documented hook for the memory CPython's small-object allocator and frame stack take from the
-system) that keeps up to :data:`KEPT` freed blocks of at most :data:`LARGEST` bytes and hands
-them out again for a request of the same size; every other request goes to the allocator it
-replaces (CPython's ``mmap``/``munmap``). The kept blocks are guarded by a lock of their own
-(CPython may free a thread state's frame stack without the GIL). The blocks hold frames and small
-objects only, never results: values are unchanged. It is a C kernel of :mod:`panto.fmu_src.c_kernels` (built on first
-use, cached); without a compiler, on another Python version, or with ``PANTO_KEEP_STACK_CHUNKS=0``
-nothing is installed and everything runs as before, slower where a loop thrashes.
+system) that keeps up to :data:`KEPT` freed blocks of at most :data:`LARGEST` bytes (frame-stack
+chunks: the small-object allocator's arenas are larger and always go back) and hands them out
+again for a request of the same size; every other request goes to the allocator it replaces
+(CPython's ``mmap``/``munmap``). The kept blocks are guarded by a lock of their own (CPython may
+free a thread state's frame stack without the GIL), reset in a forked child. The blocks hold
+frames, never results: values are unchanged. It is a C kernel of :mod:`panto.fmu_src.c_kernels`
+(built on first use, cached); without a compiler, on another Python version, or with
+``PANTO_KEEP_STACK_CHUNKS=0`` nothing is installed and everything runs as before, slower where a
+loop thrashes.
+
+It changes the whole process's allocator and cannot be taken back, so the library never installs
+it on its own: the programs do (the ``panto`` command line, the diagnosis' worker processes, the
+benchmark scripts, the tests' conftest). A program calling :func:`~panto.identification.diagnosis.pipeline.diagnose`
+or :func:`~panto.identification.estimation.global_fit.fit_global` itself may call
+:func:`keep_stack_chunks` first.
 """
 from __future__ import annotations
 
 import ctypes
 import sys
+import threading
 
 from panto.fmu_src import c_kernels
 
 #: Environment variable: ``0`` leaves CPython's arena allocator as it is.
 SWITCH_VARIABLE = "PANTO_KEEP_STACK_CHUNKS"
-#: Freed blocks kept for reuse at most (a frame-stack chunk is 16 KiB: at most 512 KiB kept).
+#: Freed blocks kept for reuse at most (frame-stack chunks of 16 KiB, larger for a huge frame:
+#: at most 32 x 64 KiB = 2 MiB kept).
 KEPT = 32
-#: Largest block kept [bytes] (the small-object allocator's arenas, 1 MiB, always go back).
+#: Largest block kept [bytes] (the small-object allocator's arenas, 256 KiB or 1 MiB, always
+#: go back).
 LARGEST = 65536
 
 SOURCE = f"""
@@ -86,11 +97,21 @@ static void give(void *ctx, void *block, size_t size) {{
         previous.free(previous.ctx, block, size);
 }}
 
+/* A forked child starts with the lock free whatever another thread of its parent held. */
+static void reset_lock(void) {{
+    pthread_mutex_init(&lock, NULL);
+}}
+
+/* Called with the GIL held (ctypes.PYFUNCTYPE), so two threads never install at once. */
 int panto_keep_stack_chunks(void) {{
     if (!installed) {{
-        Arena mine = {{NULL, take, give}};
-        PyObject_GetArenaAllocator(&previous);
-        PyObject_SetArenaAllocator(&mine);
+        Arena current, mine = {{NULL, take, give}};
+        PyObject_GetArenaAllocator(&current);
+        if (current.alloc != take) {{  /* never wrap itself */
+            previous = current;
+            pthread_atfork(NULL, NULL, reset_lock);
+            PyObject_SetArenaAllocator(&mine);
+        }}
         installed = 1;
     }}
     return count;
@@ -99,34 +120,38 @@ int panto_keep_stack_chunks(void) {{
 
 
 def _bind(library: ctypes.CDLL):
-    function = library.panto_keep_stack_chunks
-    function.restype = ctypes.c_int
-    function.argtypes = []
-    return function
+    """The installer, called with the GIL held (``PYFUNCTYPE``: a plain ctypes call releases it,
+    and two threads could then install at once)."""
+    library.panto_keep_stack_chunks  # AttributeError: not our library
+    return ctypes.PYFUNCTYPE(ctypes.c_int)(("panto_keep_stack_chunks", library))
 
 
 #: The allocator's library (built on first use into the kernel cache).
 KERNEL = c_kernels.Kernel("keep_stack_chunks", SWITCH_VARIABLE, ("-O2", "-pthread"), SOURCE,
                           _bind)
 
-_state = {"installed": False}
+_state = {"installed": False, "tried": False}
+_lock = threading.Lock()
 
 
 def keep_stack_chunks() -> bool:
     """Install the arena allocator in this process (module notes), once; True when it is in
     place. Only on CPython 3.11 and 3.12 (where the chunks are not cached), not under a
-    switched-off :data:`SWITCH_VARIABLE`, and only where the library builds."""
-    if _state["installed"]:
+    switched-off :data:`SWITCH_VARIABLE`, and only where the library builds (tried once per
+    process)."""
+    with _lock:
+        if _state["installed"] or _state["tried"]:
+            return _state["installed"]
+        if sys.implementation.name != "cpython" or \
+                sys.version_info[:2] not in ((3, 11), (3, 12)) or not KERNEL.enabled():
+            return False
+        _state["tried"] = True
+        install = KERNEL.load()
+        if install is None:
+            return False
+        install()
+        _state["installed"] = True
         return True
-    if sys.implementation.name != "cpython" or sys.version_info[:2] not in ((3, 11), (3, 12)) \
-            or not KERNEL.enabled():
-        return False
-    install = KERNEL.load()
-    if install is None:
-        return False
-    install()
-    _state["installed"] = True
-    return True
 
 
 __all__ = ["keep_stack_chunks", "SWITCH_VARIABLE", "KEPT", "LARGEST"]

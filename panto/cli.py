@@ -221,12 +221,12 @@ _COMMAND_MODULES = ("panto.commands_cosim", "panto.commands_rig", "panto.command
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``panto`` console script: the exit code (:data:`EXIT_CODES`)."""
-    keep_stack_chunks()  # every command's loops without CPython 3.11's chunk thrashing
     parser, handlers = _parser()
     try:
         args = parser.parse_args(argv)
     except SystemExit as done:  # --help, --version, a usage error
         return done.code if isinstance(done.code, int) else 2
+    keep_stack_chunks()  # every command's loops without CPython 3.11's chunk thrashing
     level = verbosity(args)
     console.set_verbosity(level, json_to_stdout=getattr(args, "json", None) == "-")
     try:

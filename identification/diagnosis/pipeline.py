@@ -108,7 +108,6 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from panto.fmu_src.frame_stack import keep_stack_chunks
 from panto.identification.diagnosis.challenge import (challenge, challengeable, comparable,
                                                      discovery_hypothesis, lesser_part, withdraw,
                                                      yielded_summary)
@@ -366,7 +365,6 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
     progress : callable, optional
         Receives progress lines.
     """
-    keep_stack_chunks()  # the searches' hot loops, without CPython 3.11's chunk thrashing
     started = time.perf_counter()
     say = progress or (lambda line: None)
     _check_runs(train, validation)

@@ -116,7 +116,6 @@ import numpy as np
 from scipy import optimize
 from scipy.stats import qmc
 
-from panto.fmu_src.frame_stack import keep_stack_chunks
 from panto.identification.estimation.base import (IdentificationData, IdentificationError,
                                                   IdentificationResult, ModelStructure)
 from panto.identification.estimation.frequency_response import (
@@ -626,7 +625,6 @@ def fit_global(structure: ModelStructure, data: IdentificationData, *, free: Seq
         out of the agreement check), ``data_driven`` (why not, or
         the candidates' frequency-response costs) and ``best_linear_approximation`` (summary).
     """
-    keep_stack_chunks()  # the mapping's hot loops, without CPython 3.11's chunk thrashing
     started = time.perf_counter()
     say = progress or (lambda line: None)
     problem, _, lower, upper = make_problem(structure, data, free, initial, bounds)
