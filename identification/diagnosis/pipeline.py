@@ -368,6 +368,10 @@ def diagnose(train: IdentificationData, validation: IdentificationData, *,
     started = time.perf_counter()
     say = progress or (lambda line: None)
     _check_runs(train, validation)
+    constant = _constant_outputs(validation)
+    if constant and len(constant) < len(validation.output_names):
+        say(f"diagnose: WARNING: the validation run's {', '.join(constant)} never changes: its "
+            "fit is undefined, so the withheld gains are judged on the other outputs")
     if _same_run(train, validation):
         say("diagnose: WARNING: the validation run is the training run; nothing is withheld, so "
             "the withheld-data tests cannot judge an effect (give a different run)")
@@ -479,6 +483,13 @@ def _check_runs(train: IdentificationData, validation: IdentificationData) -> No
         raise IdentificationError(f"training ({train.input_names} -> {train.output_names}) and "
                                   f"validation ({validation.input_names} -> "
                                   f"{validation.output_names}) signals differ")
+
+
+def _constant_outputs(validation: IdentificationData) -> list[str]:
+    """The validation run's outputs that never change (their fit is undefined: a force sensor
+    reading zero while the head never touches the wire)."""
+    return [name for j, name in enumerate(validation.output_names)
+            if not np.nanmax(validation.outputs[:, j]) > np.nanmin(validation.outputs[:, j])]
 
 
 def _uncovered(candidates: Sequence[str], nominal: ModelStructure, say: Progress) -> list[str]:

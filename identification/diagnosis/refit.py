@@ -773,7 +773,8 @@ def linear_explains(effect: str, trial: Mapping[str, Any],
     if any(g > IMPROVEMENT_FLOOR for g in gains.values()):
         return {}
     reason = ("a linear black box validates as well (" +
-              ", ".join(f"{o} {g:+.2f} points" for o, g in gains.items()) +
+              (", ".join(f"{o} {g:+.2f} points" for o, g in gains.items() if math.isfinite(g))
+               or "no output's withheld fit is defined") +
               "): not named for a linear difference")
     return {"accepted": False, "failed": tuple(trial["failed"]) + (reason,)}
 

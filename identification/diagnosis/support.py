@@ -318,14 +318,20 @@ def withheld_gain(validation: IdentificationData, current: np.ndarray, simulated
     """What every candidate's withheld-run tests start from (module notes): the free-run fits
     [%] per output before (`current`) and after (`simulated`), the mean improvement and the best
     output's, the blocked folds' improvements (per output and mean), their spread and standard
-    error, and the outputs made worse beyond chance (``failed``, :func:`worsened`)."""
+    error, and the outputs made worse beyond chance (``failed``, :func:`worsened`). The mean and
+    the best are over the outputs whose withheld fit is defined: an output constant on the
+    withheld run (a force sensor reading zero while the head never touches) has no fit, and
+    its NaN made every candidate's gain NaN and every candidate fail (seen held-out three-mass/
+    contact_loss/7013); NaN when no output has one."""
     fit_before, fit_after = _fits(validation, current), _fits(validation, simulated)
     per_output = fold_improvements(validation, current, simulated, folds)
     per_fold = [float(v) for v in np.nanmean(per_output, axis=1)]
     spread = float(np.std(per_fold, ddof=1)) if len(per_fold) > 1 else 0.0
+    changes = [fit_after[o] - fit_before[o] for o in fit_before
+               if math.isfinite(fit_after[o] - fit_before[o])]
     return {"fit_before": fit_before, "fit_after": fit_after,
-            "improvement": float(np.mean([fit_after[o] - fit_before[o] for o in fit_before])),
-            "best": max(fit_after[o] - fit_before[o] for o in fit_before),
+            "improvement": float(np.mean(changes)) if changes else math.nan,
+            "best": max(changes) if changes else math.nan,
             "per_fold": per_fold, "spread": spread,
             "standard_error": spread / math.sqrt(len(per_fold)),
             "failed": worsened(fit_before, fit_after, per_output)}
