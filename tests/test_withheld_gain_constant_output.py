@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from panto.identification.diagnosis.pipeline import _constant_outputs
-from panto.identification.diagnosis.support import withheld_gain
+from panto.identification.diagnosis.support import fit_text, withheld_gain
 from panto.identification.estimation.base import IdentificationData, fit_percent
 
 
@@ -42,3 +42,9 @@ def test_no_output_with_a_fit_leaves_the_gain_undefined():
     gain = withheld_gain(flat, current, better, 4)
     assert math.isnan(gain["improvement"]) and math.isnan(gain["best"])
     assert _constant_outputs(flat) == ["F_c", "y_cb"]
+
+
+def test_an_undefined_fit_reads_undefined_in_the_reports():
+    assert fit_text(97.64) == "97.6 %"
+    assert fit_text(97.64, 2) == "97.64 %"
+    assert fit_text(math.nan) == "undefined"

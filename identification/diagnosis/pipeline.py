@@ -128,8 +128,8 @@ from panto.identification.diagnosis.residual_energy import jsonable
 from panto.identification.diagnosis import backward, choice, run_offset
 from panto.identification.diagnosis.support import (NO_GAIN_REASONS, build_structure,
                                                     default_roles, drift_test, effective_samples,
-                                                    gap_significance, retuning, settling_time,
-                                                    systematic_cost, where_summary)
+                                                    fit_text, gap_significance, retuning,
+                                                    settling_time, systematic_cost, where_summary)
 from panto.identification.estimation.base import (IdentificationData, IdentificationError,
                                                   ModelStructure)
 from panto.identification.estimation.global_fit import GlobalFitOptions
@@ -636,7 +636,7 @@ def _between_runs(model: Model, current: np.ndarray, remaining: Sequence[str],
 
 
 def _fits(fits: Mapping[str, float]) -> str:
-    return ", ".join(f"{k} {v:.2f} %" for k, v in fits.items())
+    return ", ".join(f"{k} {fit_text(v, 2)}" for k, v in fits.items())
 
 
 def _analyse(data: IdentificationData, simulated: np.ndarray, model: Model,
@@ -757,7 +757,9 @@ def _summary(verdict: str, effects: Sequence[str], before: Mapping[str, float],
             + "; ".join(ignored) + ")" if ignored else "the validation residual is independent "
             "of the inputs, shows no nonlinearity and no offset") +
             ", and no candidate effect improves the withheld fit significantly")
-    fits = ", ".join(f"{o} {before[o]:.1f} -> {after[o]:.1f} %" for o in before)
+    fits = ", ".join(f"{o} {before[o]:.1f} -> {after[o]:.1f} %" if math.isfinite(before[o])
+                     and math.isfinite(after[o]) else f"{o} {fit_text(before[o])} -> "
+                     f"{fit_text(after[o])}" for o in before)
     if verdict == "unexplained":
         drifting = [f"{o} residual {' and '.join(terms)} drift over the record"
                     for o, terms in (remaining.get("drift") or {}).items() if terms]

@@ -532,6 +532,12 @@ def worsened(before: Mapping[str, float], after: Mapping[str, float],
     return failed
 
 
+def fit_text(fit: float, digits: int = 1) -> str:
+    """A fit [%] as the reports print it: ``"97.6 %"``, or ``"undefined"`` for an output that
+    never changes on the run (its fit is NaN, :func:`~panto.identification.estimation.base.fit_percent`)."""
+    return f"{fit:.{digits}f} %" if math.isfinite(fit) else "undefined"
+
+
 def _fits(data: IdentificationData, simulated: np.ndarray) -> dict[str, float]:
     return {o: float(fit_percent(data.outputs[:, j], simulated[:, j]))
             for j, o in enumerate(data.output_names)}
@@ -668,7 +674,7 @@ def where_summary(analysis: Sequence[Any], data: IdentificationData) -> dict[str
             "band_ratio": float(bands.ratio[k]), "worst_window_start_s": float(segments.start_times[s]),
             "worst_window_s": float(segments.window), "condition": condition,
             "nonlinearity": a.nonlinearity.kind, "hints": hints}
-        text = (f"in {a.output_name} (fit {a.fit:.1f} %), {100 * bands.share[k]:.0f} % of its "
+        text = (f"in {a.output_name} (fit {fit_text(a.fit)}), {100 * bands.share[k]:.0f} % of its "
                 f"residual power in {band[0]:.3g}-{band[1]:.3g} Hz")
         if condition:
             text += (f", gathered where {condition['variable']} is in [{condition['low']:.3g}, "
