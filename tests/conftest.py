@@ -20,9 +20,9 @@ if os.environ.get("PYTEST_XDIST_WORKER") is not None:
     # that ask for workers explicitly still get their pool
     os.environ.setdefault("PANTO_WORKERS", "1")
 
-# every test's loops without CPython 3.11's frame-stack chunk thrashing (as the command line and
-# the diagnosis run; panto.fmu_src.frame_stack): the tests' deeper stacks would otherwise put a
-# hot loop on a chunk boundary where a user's run has none
+# every test's loops without CPython 3.11's frame-stack chunk thrashing, as the command line runs
+# (panto.fmu_src.frame_stack: where a hot loop meets a chunk boundary depends on the stack's depth,
+# which differs between a test and a user's run)
 keep_stack_chunks()
 
 

@@ -270,15 +270,7 @@ class OscillatorStructure(ModelStructure):
     @staticmethod
     def _chain(values: Sequence[float]) -> np.ndarray:
         """Chain matrix of springs (or dampers) base-1, 1-2, ..., (n-1)-n."""
-        n = len(values)
-        out = np.zeros((n, n))
-        out[0, 0] = values[0]
-        for i in range(1, n):
-            out[i, i] += values[i]
-            out[i - 1, i - 1] += values[i]
-            out[i, i - 1] -= values[i]
-            out[i - 1, i] -= values[i]
-        return out
+        return np.array(_chain_rows(values), float)
 
     def equilibrium(self, parameters: Mapping[str, float], eta: float, p: float) -> np.ndarray:
         """Static equilibrium state ``[z; 0]`` for constant inputs (friction is zero at rest)."""
@@ -345,8 +337,9 @@ class OscillatorStructure(ModelStructure):
 
 
 def _chain_rows(values: Sequence[float]) -> list[list[float]]:
-    """:meth:`OscillatorStructure._chain` as nested lists of Python floats (the same
-    operations in the same order)."""
+    """The chain matrix of springs (or dampers) base-1, 1-2, ..., (n-1)-n as nested lists (each
+    value added to its two masses' diagonal entries and taken from their coupling entries; as
+    Python floats where :meth:`OscillatorStructure.matrices` assembles from them)."""
     n = len(values)
     out = [[0.0] * n for _ in range(n)]
     out[0][0] = values[0]
