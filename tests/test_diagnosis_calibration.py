@@ -113,3 +113,21 @@ def test_settling_time_of_a_first_order_lag():
     tau = -(1 / RATE) / math.log(0.95)
     assert settling_time(model, parameters, data) == pytest.approx(tau * math.log(50),
                                                                     abs=2 / RATE)
+
+
+@pytest.mark.parametrize("periods, phase", [(0.67, 0.4), (1.0, 2.0), (2.0, 5.0)])
+def test_systematic_cost_of_a_swinging_sensor_gain(periods, phase):
+    # y = (1 + g sin(2 pi t / P + phase)) y_hat + white noise, P from 1.5 to 0.5 records: the
+    # systematic part g sin(...) y_hat costs 100 ||g sin(...) y_hat|| / ||y - mean||. A straight
+    # drift line alone (the cost's terms before session 53) took a fraction of a swing whose
+    # period is shorter than the record.
+    rng = np.random.default_rng(1)
+    n = 1000
+    u = _aprbs(5, n)
+    y_hat = 10.0 * _aprbs(6, n)
+    t = np.arange(n) / n
+    part = 0.1 * np.sin(2 * np.pi * periods * t + phase) * y_hat
+    y = y_hat + part + 0.2 * rng.normal(size=n)
+    expected = 100 * np.linalg.norm(part - part.mean()) / np.linalg.norm(y - y.mean())
+    assert expected > 3.0
+    assert systematic_cost(u[:, None], y, y_hat) == pytest.approx(expected, rel=0.1)
