@@ -409,12 +409,15 @@ class AugmentedStructure(ModelStructure):
         """Continuous ``(A, B, C, D)`` from `data`'s inputs to its outputs, for a sensor mass
         whose acceleration the wrapped structure gives exactly (:meth:`_exact_acceleration`):
         the force's rows less the mass times the acceleration's; for an actuator lag on an input
-        of a wrapped structure that gives its own (:meth:`_lagged_system`), and for an extra
-        mass inside a linear oscillator (its own). Raises
+        of a wrapped structure that gives its own (:meth:`_lagged_system`), for an input delay
+        the wrapped structure's own without the delay (:meth:`input_delays` gives it), and for
+        an extra mass inside a linear oscillator (its own). Raises
         NotImplementedError for any other effect (a global refit then starts from the defaults
         and perturbations only)."""
         if self.effect == "actuator_lag" and self.mode == "wrapper":
             return self._lagged_system(parameters, data)
+        if self.effect == "input_delay" and self.mode == "wrapper":
+            return self._undelayed_system(parameters, data)
         if self.effect == "extra_mode" and self.mode == "inside":
             return self.base.linear_system(parameters, data)
         exact = self._exact_acceleration(data)
@@ -434,6 +437,28 @@ class AugmentedStructure(ModelStructure):
             c[target] -= mass * c[-1]
             d[target] -= mass * d[-1]
         return a, b, c[:-1], d[:-1]
+
+    def input_delays(self, parameters: Mapping[str, float], data: IdentificationData
+                     ) -> tuple[float, ...] | None:
+        """The delay [s] of each of `data`'s inputs for an input delay wrapping a structure
+        (zero but on the delayed input), which :meth:`linear_system` leaves out: a delay has no
+        rational ``(A, B, C, D)``, so the frequency mapping of a global refit
+        (:mod:`~panto.identification.estimation.global_fit`) multiplies that input's response by
+        ``exp(-j w d)`` itself. None for other effects."""
+        if self.effect != "input_delay" or self.mode != "wrapper":
+            return None
+        key = f"input_delay:{self.effect_input}"
+        delay = float(parameters[key] if key in parameters else self._starts[key])
+        return tuple(delay if name == self.effect_input else 0.0 for name in data.input_names)
+
+    def _undelayed_system(self, parameters: Mapping[str, float], data: IdentificationData
+                          ) -> tuple[np.ndarray, ...]:
+        """The wrapped structure's own ``(A, B, C, D)``, the input delay left to
+        :meth:`input_delays`."""
+        if not callable(getattr(self.base, "linear_system", None)):
+            raise NotImplementedError(f"{self.name}: {self.base.name} gives no linear system")
+        return self.base.linear_system({k: v for k, v in parameters.items()
+                                        if k not in self._bounds}, data)
 
     def _lagged_system(self, parameters: Mapping[str, float], data: IdentificationData
                        ) -> tuple[np.ndarray, ...]:

@@ -239,10 +239,31 @@ class _FrequencyProblem:
         """The structure's ``(A, B, C, D)`` at the transformed free parameters `z`."""
         return self.structure.linear_system(self.problem.parameters(z), self.data)
 
-    def response(self, system: Sequence[np.ndarray]) -> np.ndarray:
-        """The discrete frequency response of `system` at the kept frequencies."""
-        return discrete_frequency_response(system, self.frequency, self.period, self.hold,
-                                           stable=True)
+    def delays(self, z: np.ndarray) -> np.ndarray | None:
+        """The structure's delay [s] of each input at the transformed free parameters `z`
+        (its optional ``input_delays(parameters, data)``), or None where it has none."""
+        delays = getattr(self.structure, "input_delays", None)
+        if delays is None:
+            return None
+        found = delays(self.problem.parameters(z), self.data)
+        return None if found is None else np.asarray(found, float)
+
+    def response(self, system: Sequence[np.ndarray], delays: np.ndarray | None = None
+                 ) -> np.ndarray:
+        """The discrete frequency response of `system` at the kept frequencies, each input's
+        column times ``exp(-j w d)`` for its delay `d` [s] where `delays` are given."""
+        return self.delayed(discrete_frequency_response(system, self.frequency, self.period,
+                                                        self.hold, stable=True), delays)
+
+    def delayed(self, response: np.ndarray, delays: np.ndarray | None) -> np.ndarray:
+        """`response` (frequency, output, input) with each input's column delayed by its entry
+        of `delays` [s] (None or zeros: unchanged). The frequency mapping's delay is the
+        continuous ``exp(-j w d)``; the time-domain refit that polishes its starts simulates
+        the delay as it is (:class:`~panto.identification.diagnosis.augmentations.
+        AugmentedStructure`: interpolated between samples)."""
+        if delays is None or not np.any(delays):
+            return response
+        return response * np.exp(-2j * np.pi * np.outer(self.frequency, delays))[:, None, :]
 
     def weighted(self, response: np.ndarray) -> np.ndarray:
         """Real and imaginary weighted errors of `response`."""
@@ -251,7 +272,7 @@ class _FrequencyProblem:
 
     def residuals(self, z: np.ndarray) -> np.ndarray:
         """Real and imaginary weighted errors at the transformed free parameters `z`."""
-        return self.weighted(self.response(self.system(z)))
+        return self.weighted(self.response(self.system(z), self.delays(z)))
 
 
 #: Origin suffix of a data-driven start polished from the structure's defaults: not counted as
@@ -307,10 +328,13 @@ class _ReducedCost:
             modal = iter(modal_frequency_responses([s for s in systems if s is not None],
                                                    problem.frequency, problem.period,
                                                    problem.hold, stable=True))
+            delays = [None if s is None else problem.delays(self.full(x))
+                      for s, x in zip(systems, points)]
         except _FAILURES:  # the stack failed as a whole: one by one, as without it
             return [self(x) for x in points]
-        return [self._checked(None if system is None else self._weighted(system, next(modal)))
-                for system in systems]
+        return [self._checked(None if system is None else
+                              self._weighted(system, next(modal), delay))
+                for system, delay in zip(systems, delays)]
 
     def _system(self, x: np.ndarray) -> tuple[np.ndarray, ...] | None:
         """The structure's ``(A, B, C, D)`` at the relevant parameters `x`, None where it fails."""
@@ -319,13 +343,15 @@ class _ReducedCost:
         except _FAILURES:
             return None
 
-    def _weighted(self, system: Sequence[np.ndarray], response: np.ndarray | None
-                  ) -> np.ndarray | None:
-        """The weighted residual of `system`, whose `response` is given or (None) computed here;
-        None where that fails."""
+    def _weighted(self, system: Sequence[np.ndarray], response: np.ndarray | None,
+                  delays: np.ndarray | None = None) -> np.ndarray | None:
+        """The weighted residual of `system` with its inputs' `delays` (:meth:`_FrequencyProblem.
+        delays`), whose undelayed `response` is given or (None) computed here; None where that
+        fails."""
         problem = self.frequency_problem
         try:
-            return problem.weighted(problem.response(system) if response is None else response)
+            return problem.weighted(problem.response(system, delays) if response is None else
+                                    problem.delayed(response, delays))
         except _FAILURES:
             return None
 
