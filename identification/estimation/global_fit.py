@@ -345,9 +345,9 @@ class _ReducedCost:
 
     def _weighted(self, system: Sequence[np.ndarray], response: np.ndarray | None,
                   delays: np.ndarray | None = None) -> np.ndarray | None:
-        """The weighted residual of `system` with its inputs' `delays` (:meth:`_FrequencyProblem.
-        delays`), whose undelayed `response` is given or (None) computed here; None where that
-        fails."""
+        """The weighted residual of `system` with its inputs' `delays`
+        (:meth:`_FrequencyProblem.delays`), whose undelayed `response` is given or (None)
+        computed here; None where that fails."""
         problem = self.frequency_problem
         try:
             return problem.weighted(problem.response(system, delays) if response is None else
