@@ -881,8 +881,9 @@ def systematic_cost(inputs: np.ndarray, measured: np.ndarray, simulated: np.ndar
         x = (x - np.mean(x)) / (np.std(x) or 1.0)
         columns += [np.r_[np.full(k, x[0]), x[:n - k]] for k in range(min(lags, n - 1))]
     scaled = (y_hat - np.mean(y_hat)) / (np.std(y_hat) or 1.0)
+    share = np.linspace(0.0, 1.0, n)  # of the record
     for k in range(1, DRIFT_HARMONICS + 1):
-        drift = np.cos(np.pi * k * np.linspace(0.0, 1.0, n))
+        drift = np.cos(np.pi * k * share)
         columns += [drift, drift * scaled]
     phi = np.column_stack(columns)[ok]
     phi = phi / np.maximum(np.linalg.norm(phi, axis=0), 1e-300)

@@ -234,19 +234,16 @@ class _FrequencyProblem:
         weight = np.maximum(bla.std[keep][self.mask], floor * np.abs(self.target))
         self.weight = 1.0 / np.maximum(weight, 1e-300)
         self.period = bla.period
+        self.input_delays = getattr(structure, "input_delays", None)
 
-    def system(self, z: np.ndarray) -> tuple[np.ndarray, ...]:
-        """The structure's ``(A, B, C, D)`` at the transformed free parameters `z`."""
-        return self.structure.linear_system(self.problem.parameters(z), self.data)
-
-    def delays(self, z: np.ndarray) -> np.ndarray | None:
-        """The structure's delay [s] of each input at the transformed free parameters `z`
-        (its optional ``input_delays(parameters, data)``), or None where it has none."""
-        delays = getattr(self.structure, "input_delays", None)
-        if delays is None:
-            return None
-        found = delays(self.problem.parameters(z), self.data)
-        return None if found is None else np.asarray(found, float)
+    def system(self, z: np.ndarray) -> tuple[tuple[np.ndarray, ...], np.ndarray | None]:
+        """The structure's ``(A, B, C, D)`` at the transformed free parameters `z`, and its
+        delay [s] of each input (its optional ``input_delays(parameters, data)``; None where it
+        has none), from one set of parameter values."""
+        parameters = self.problem.parameters(z)
+        system = self.structure.linear_system(parameters, self.data)
+        delays = None if self.input_delays is None else self.input_delays(parameters, self.data)
+        return system, None if delays is None else np.asarray(delays, float)
 
     def response(self, system: Sequence[np.ndarray], delays: np.ndarray | None = None
                  ) -> np.ndarray:
@@ -272,7 +269,7 @@ class _FrequencyProblem:
 
     def residuals(self, z: np.ndarray) -> np.ndarray:
         """Real and imaginary weighted errors at the transformed free parameters `z`."""
-        return self.weighted(self.response(self.system(z), self.delays(z)))
+        return self.weighted(self.response(*self.system(z)))
 
 
 #: Origin suffix of a data-driven start polished from the structure's defaults: not counted as
@@ -325,29 +322,26 @@ class _ReducedCost:
         points = list(points)
         systems = [self._system(x) for x in points]
         try:
-            modal = iter(modal_frequency_responses([s for s in systems if s is not None],
+            modal = iter(modal_frequency_responses([s[0] for s in systems if s is not None],
                                                    problem.frequency, problem.period,
                                                    problem.hold, stable=True))
-            delays = [None if s is None else problem.delays(self.full(x))
-                      for s, x in zip(systems, points)]
         except _FAILURES:  # the stack failed as a whole: one by one, as without it
             return [self(x) for x in points]
-        return [self._checked(None if system is None else
-                              self._weighted(system, next(modal), delay))
-                for system, delay in zip(systems, delays)]
+        return [self._checked(None if system is None else self._weighted(*system, next(modal)))
+                for system in systems]
 
-    def _system(self, x: np.ndarray) -> tuple[np.ndarray, ...] | None:
-        """The structure's ``(A, B, C, D)`` at the relevant parameters `x`, None where it fails."""
+    def _system(self, x: np.ndarray) -> tuple[tuple[np.ndarray, ...], np.ndarray | None] | None:
+        """The structure's ``(A, B, C, D)`` and input delays at the relevant parameters `x`
+        (:meth:`_FrequencyProblem.system`), None where it fails."""
         try:
             return self.frequency_problem.system(self.full(x))
         except _FAILURES:
             return None
 
-    def _weighted(self, system: Sequence[np.ndarray], response: np.ndarray | None,
-                  delays: np.ndarray | None = None) -> np.ndarray | None:
-        """The weighted residual of `system` with its inputs' `delays`
-        (:meth:`_FrequencyProblem.delays`), whose undelayed `response` is given or (None)
-        computed here; None where that fails."""
+    def _weighted(self, system: Sequence[np.ndarray], delays: np.ndarray | None,
+                  response: np.ndarray | None) -> np.ndarray | None:
+        """The weighted residual of `system` with its inputs' `delays`, whose undelayed
+        `response` is given or (None) computed here; None where that fails."""
         problem = self.frequency_problem
         try:
             return problem.weighted(problem.response(system, delays) if response is None else
